@@ -1,0 +1,114 @@
+//! The library's one error type.
+//!
+//! Every variant says what was expected and what was found. Variants that come from a
+//! user-supplied file carry its path (last in the message) and, for text files, the line.
+
+use std::path::PathBuf;
+
+use crate::image_buf::ImageSize;
+
+/// Result alias used throughout the library.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong in the library.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A buffer does not hold `width * height` elements.
+    #[error("image buffer has {found} elements, expected {expected} for {size}")]
+    BufferLength {
+        /// Elements the size requires.
+        expected: usize,
+        /// Elements supplied.
+        found: usize,
+        /// The image size.
+        size: ImageSize,
+    },
+
+    /// Two images that must share a size do not.
+    #[error("{what}: image size {found} does not match the expected {expected}")]
+    SizeMismatch {
+        /// Which images were compared.
+        what: String,
+        /// The size required.
+        expected: ImageSize,
+        /// The size found.
+        found: ImageSize,
+    },
+
+    /// A line of a text file could not be parsed.
+    #[error("line {line}: {message} (in {})", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What was expected and what was found.
+        message: String,
+    },
+
+    /// A file or directory could not be read or written.
+    #[error("{action}: {source} ({})", path.display())]
+    Io {
+        /// What was being done ("cannot open", "cannot write").
+        action: String,
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// An image file could not be decoded or has the wrong pixel format.
+    #[error("{message} ({})", path.display())]
+    BadImage {
+        /// The file.
+        path: PathBuf,
+        /// What was expected and what was found.
+        message: String,
+    },
+
+    /// A dataset folder is not usable as a whole (missing files, empty sequence, ...).
+    #[error("{message} ({})", path.display())]
+    Dataset {
+        /// The dataset folder or file.
+        path: PathBuf,
+        /// What was expected and what was found.
+        message: String,
+    },
+
+    /// A parameter is outside its valid range.
+    #[error("parameter {name} = {value} is invalid: expected {expected}")]
+    InvalidParameter {
+        /// The parameter's name.
+        name: &'static str,
+        /// The value given.
+        value: String,
+        /// The valid range or form.
+        expected: String,
+    },
+
+    /// An MCAP message could not be decoded.
+    #[error("topic {topic}: {message}")]
+    Decode {
+        /// The channel's topic.
+        topic: String,
+        /// What was expected and what was found.
+        message: String,
+    },
+
+    /// The MCAP library reported an error.
+    #[error("MCAP: {0}")]
+    Mcap(#[from] mcap::McapError),
+}
+
+impl Error {
+    /// Builds an [`Error::Io`] for `path`.
+    pub fn io(action: impl Into<String>, path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            action: action.into(),
+            path: path.into(),
+            source,
+        }
+    }
+}

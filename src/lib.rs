@@ -1,0 +1,18 @@
+//! occmask: RGB-D datasets to MCAP, dense visual odometry and occlusion-accumulation
+//! moving-object masks (Kim, Kim & Kim, ICRA 2020).
+//!
+//! Layers, each depending only on those above it in this list:
+//! 1. core types and math: [`error`], [`image_buf`], [`time`], [`geometry`], [`trajectory`];
+//! 2. pure algorithms (no files, no MCAP, no printing): pyramid, dvo, occlusion, metrics, synthetic;
+//! 3. I/O adapters: dataset readers, MCAP reading and writing;
+//! 4. the per-sequence pipeline;
+//! 5. the command-line interface (in the binary).
+#![deny(missing_docs)]
+
+pub mod error;
+pub mod geometry;
+pub mod image_buf;
+pub mod time;
+pub mod trajectory;
+
+pub use error::{Error, Result};
