@@ -12,6 +12,7 @@
 //! - [`output`]: [`AtomicOutput`], the temporary-file-then-rename helper every command uses.
 
 pub mod codec;
+pub mod input;
 pub mod output;
 pub mod reader;
 pub mod writer;

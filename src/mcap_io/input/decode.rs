@@ -1,0 +1,868 @@
+//! Channel classification by schema and decoding of the supported message types into
+//! flavour-independent structs ([`ImageMsg`], [`CalibrationMsg`], [`PoseSample`]), plus the
+//! pixel conversions to the pipeline's [`GrayF32`] and [`DepthMeters`].
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+use crate::error::{Error, Result};
+use crate::geometry::camera::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
+use crate::time::join_ns;
+
+use super::{json, ros2};
+
+/// How a channel's messages are serialised.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Flavor {
+    /// Foxglove well-known schema, protobuf.
+    FoxgloveProtobuf,
+    /// Foxglove well-known schema, JSON.
+    FoxgloveJson,
+    /// ROS 2 message, CDR.
+    Ros2Cdr,
+}
+
+/// What a channel carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum MessageType {
+    /// Uncompressed image (`foxglove.RawImage`, `sensor_msgs/msg/Image`).
+    RawImage,
+    /// Compressed image (`foxglove.CompressedImage`, `sensor_msgs/msg/CompressedImage`).
+    CompressedImage,
+    /// Calibration (`foxglove.CameraCalibration`, `sensor_msgs/msg/CameraInfo`).
+    Calibration,
+    /// `foxglove.PoseInFrame` / `geometry_msgs/msg/PoseStamped`.
+    PoseInFrame,
+    /// `foxglove.FrameTransform` / `geometry_msgs/msg/TransformStamped`.
+    FrameTransform,
+    /// `foxglove.FrameTransforms` / `tf2_msgs/msg/TFMessage`.
+    FrameTransforms,
+}
+
+/// A supported channel type: flavour and message type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ChannelType {
+    /// Serialisation.
+    pub flavor: Flavor,
+    /// Message type.
+    pub message: MessageType,
+}
+
+impl ChannelType {
+    /// Classifies a channel by schema name and message encoding; `None` when unsupported.
+    pub fn classify(schema_name: &str, message_encoding: &str) -> Option<Self> {
+        use MessageType as T;
+        let (flavor, message) = match (message_encoding, schema_name) {
+            ("protobuf" | "json", name) => {
+                let flavor = if message_encoding == "json" {
+                    Flavor::FoxgloveJson
+                } else {
+                    Flavor::FoxgloveProtobuf
+                };
+                let message = match name {
+                    "foxglove.RawImage" => T::RawImage,
+                    "foxglove.CompressedImage" => T::CompressedImage,
+                    "foxglove.CameraCalibration" => T::Calibration,
+                    "foxglove.PoseInFrame" => T::PoseInFrame,
+                    "foxglove.FrameTransform" => T::FrameTransform,
+                    "foxglove.FrameTransforms" => T::FrameTransforms,
+                    _ => return None,
+                };
+                (flavor, message)
+            }
+            ("cdr", name) => {
+                let message = match name {
+                    ros2::names::IMAGE => T::RawImage,
+                    ros2::names::COMPRESSED_IMAGE => T::CompressedImage,
+                    ros2::names::CAMERA_INFO => T::Calibration,
+                    ros2::names::POSE_STAMPED => T::PoseInFrame,
+                    ros2::names::TRANSFORM_STAMPED => T::FrameTransform,
+                    ros2::names::TF_MESSAGE => T::FrameTransforms,
+                    _ => return None,
+                };
+                (Flavor::Ros2Cdr, message)
+            }
+            _ => return None,
+        };
+        Some(Self { flavor, message })
+    }
+
+    /// True for image channels.
+    pub fn is_image(self) -> bool {
+        matches!(self.message, MessageType::RawImage | MessageType::CompressedImage)
+    }
+
+    /// True for pose-carrying channels.
+    pub fn is_pose(self) -> bool {
+        matches!(
+            self.message,
+            MessageType::PoseInFrame | MessageType::FrameTransform | MessageType::FrameTransforms
+        )
+    }
+}
+
+/// Pixels of an image message.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ImagePayload {
+    /// Uncompressed rows.
+    Raw {
+        /// Columns.
+        width: u32,
+        /// Rows.
+        height: u32,
+        /// Pixel encoding (`rgb8`, `16UC1`, ...).
+        encoding: String,
+        /// Bytes per row.
+        step: u32,
+        /// Multi-byte pixels are big-endian (ROS `is_bigendian`).
+        big_endian: bool,
+        /// The bytes.
+        data: Vec<u8>,
+    },
+    /// A compressed image.
+    Compressed {
+        /// The format string (`png`, `jpeg`, `16UC1; compressedDepth png`, ...).
+        format: String,
+        /// The bytes.
+        data: Vec<u8>,
+    },
+}
+
+/// An image message of any flavour.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImageMsg {
+    /// The message's own stamp (header stamp), nanoseconds.
+    pub timestamp_ns: u64,
+    /// Coordinate frame.
+    pub frame_id: String,
+    /// Pixels.
+    pub payload: ImagePayload,
+}
+
+impl ImageMsg {
+    /// The encoding (raw) or format (compressed) string, for messages and detection.
+    pub fn encoding(&self) -> &str {
+        match &self.payload {
+            ImagePayload::Raw { encoding, .. } => encoding,
+            ImagePayload::Compressed { format, .. } => format,
+        }
+    }
+
+    /// True when the encoding is a depth encoding (`16UC1`, `mono16`, `32FC1`, compressedDepth).
+    pub fn is_depth(&self) -> bool {
+        match &self.payload {
+            ImagePayload::Raw { encoding, .. } => {
+                matches!(encoding.as_str(), "16UC1" | "mono16" | "32FC1")
+            }
+            ImagePayload::Compressed { format, .. } => format.contains("compressedDepth"),
+        }
+    }
+}
+
+/// A calibration of any flavour.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationMsg {
+    /// Stamp, nanoseconds.
+    pub timestamp_ns: u64,
+    /// Frame.
+    pub frame_id: String,
+    /// Image size the calibration is for.
+    pub size: ImageSize,
+    /// K, row-major (9 numbers when well-formed).
+    pub k: Vec<f64>,
+}
+
+impl CalibrationMsg {
+    /// Pinhole intrinsics from K.
+    ///
+    /// # Errors
+    /// [`Error::Decode`] naming `topic` when K is not a 3×3 pinhole matrix with positive focal
+    /// lengths (a zero K means "uncalibrated" in ROS).
+    pub fn intrinsics(&self, topic: &str) -> Result<PinholeIntrinsics> {
+        let k = &self.k;
+        if k.len() != 9 {
+            return Err(decode_error(
+                topic,
+                format!("expected a 3x3 K (9 numbers), found {} numbers", k.len()),
+            ));
+        }
+        let intrinsics = PinholeIntrinsics::new(k[0], k[4], k[2], k[5]);
+        if !intrinsics.is_valid() || k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
+            return Err(decode_error(
+                topic,
+                format!(
+                    "expected a pinhole K [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0, found {k:?} \
+                     (an all-zero K means the camera is uncalibrated: pass --camera FX,FY,CX,CY)"
+                ),
+            ));
+        }
+        Ok(intrinsics)
+    }
+}
+
+/// One pose sample: `parent_from_child` at a time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseSample {
+    /// Stamp, nanoseconds.
+    pub timestamp_ns: u64,
+    /// Frame the pose is expressed in.
+    pub parent_frame: String,
+    /// The frame being placed (transforms only; `None` for PoseInFrame/PoseStamped).
+    pub child_frame: Option<String>,
+    /// The pose.
+    pub parent_from_child: Isometry3<f64>,
+}
+
+pub(crate) fn decode_error(topic: &str, message: impl Into<String>) -> Error {
+    Error::Decode {
+        topic: topic.to_owned(),
+        message: message.into(),
+    }
+}
+
+fn proto<T: prost::Message + Default>(data: &[u8], topic: &str, what: &str) -> Result<T> {
+    T::decode(data).map_err(|e| decode_error(topic, format!("expected a protobuf {what}: {e}")))
+}
+
+fn from_json<'a, T: serde::Deserialize<'a>>(data: &'a [u8], topic: &str, what: &str) -> Result<T> {
+    serde_json::from_slice(data).map_err(|e| decode_error(topic, format!("expected a JSON {what}: {e}")))
+}
+
+fn from_cdr<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str) -> Result<T> {
+    // The `cdr` crate reads the 4-byte encapsulation header (little- or big-endian XCDR1).
+    cdr::deserialize::<T>(data).map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
+}
+
+fn proto_ns(stamp: Option<&foxglove::messages::Timestamp>) -> u64 {
+    stamp.map_or(0, |t| join_ns(u64::from(t.sec()), t.nsec()))
+}
+
+fn json_ns(t: json::Time, topic: &str) -> Result<u64> {
+    let nsec = u32::try_from(t.nsec)
+        .ok()
+        .filter(|&n| n < 1_000_000_000)
+        .ok_or_else(|| decode_error(topic, format!("expected timestamp nsec < 1e9, found {}", t.nsec)))?;
+    Ok(join_ns(t.sec, nsec))
+}
+
+fn ros_ns(t: ros2::Time, topic: &str) -> Result<u64> {
+    let sec = u64::try_from(t.sec).map_err(|_| {
+        decode_error(
+            topic,
+            format!("expected a non-negative stamp, found sec = {}", t.sec),
+        )
+    })?;
+    if t.nanosec >= 1_000_000_000 {
+        return Err(decode_error(
+            topic,
+            format!("expected stamp nanosec < 1e9, found {}", t.nanosec),
+        ));
+    }
+    Ok(join_ns(sec, t.nanosec))
+}
+
+/// Decodes an image message.
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` when the bytes are not a valid message of the type.
+pub fn decode_image(ct: ChannelType, topic: &str, data: &[u8]) -> Result<ImageMsg> {
+    use foxglove::messages as fm;
+    match (ct.flavor, ct.message) {
+        (Flavor::FoxgloveProtobuf, MessageType::RawImage) => {
+            let m: fm::RawImage = proto(data, topic, "foxglove.RawImage")?;
+            Ok(ImageMsg {
+                timestamp_ns: proto_ns(m.timestamp.as_ref()),
+                frame_id: m.frame_id,
+                payload: ImagePayload::Raw {
+                    width: m.width,
+                    height: m.height,
+                    encoding: m.encoding,
+                    step: m.step,
+                    big_endian: false,
+                    data: m.data.to_vec(),
+                },
+            })
+        }
+        (Flavor::FoxgloveProtobuf, MessageType::CompressedImage) => {
+            let m: fm::CompressedImage = proto(data, topic, "foxglove.CompressedImage")?;
+            Ok(ImageMsg {
+                timestamp_ns: proto_ns(m.timestamp.as_ref()),
+                frame_id: m.frame_id,
+                payload: ImagePayload::Compressed {
+                    format: m.format,
+                    data: m.data.to_vec(),
+                },
+            })
+        }
+        (Flavor::FoxgloveJson, MessageType::RawImage) => {
+            let m: json::RawImage = from_json(data, topic, "foxglove.RawImage")?;
+            Ok(ImageMsg {
+                timestamp_ns: json_ns(m.timestamp, topic)?,
+                frame_id: m.frame_id,
+                payload: ImagePayload::Raw {
+                    width: m.width,
+                    height: m.height,
+                    encoding: m.encoding,
+                    step: m.step,
+                    big_endian: false,
+                    data: m.data.0,
+                },
+            })
+        }
+        (Flavor::FoxgloveJson, MessageType::CompressedImage) => {
+            let m: json::CompressedImage = from_json(data, topic, "foxglove.CompressedImage")?;
+            Ok(ImageMsg {
+                timestamp_ns: json_ns(m.timestamp, topic)?,
+                frame_id: m.frame_id,
+                payload: ImagePayload::Compressed {
+                    format: m.format,
+                    data: m.data.0,
+                },
+            })
+        }
+        (Flavor::Ros2Cdr, MessageType::RawImage) => {
+            let m: ros2::Image = from_cdr(data, topic, ros2::names::IMAGE)?;
+            Ok(ImageMsg {
+                timestamp_ns: ros_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                payload: ImagePayload::Raw {
+                    width: m.width,
+                    height: m.height,
+                    encoding: m.encoding,
+                    step: m.step,
+                    big_endian: m.is_bigendian != 0,
+                    data: m.data,
+                },
+            })
+        }
+        (Flavor::Ros2Cdr, MessageType::CompressedImage) => {
+            let m: ros2::CompressedImage = from_cdr(data, topic, ros2::names::COMPRESSED_IMAGE)?;
+            Ok(ImageMsg {
+                timestamp_ns: ros_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                payload: ImagePayload::Compressed {
+                    format: m.format,
+                    data: m.data,
+                },
+            })
+        }
+        _ => Err(decode_error(
+            topic,
+            format!("expected an image channel, found {:?}", ct.message),
+        )),
+    }
+}
+
+/// Decodes a calibration message.
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` when the bytes are not a valid calibration.
+pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<CalibrationMsg> {
+    match (ct.flavor, ct.message) {
+        (Flavor::FoxgloveProtobuf, MessageType::Calibration) => {
+            let m: foxglove::messages::CameraCalibration = proto(data, topic, "foxglove.CameraCalibration")?;
+            Ok(CalibrationMsg {
+                timestamp_ns: proto_ns(m.timestamp.as_ref()),
+                frame_id: m.frame_id,
+                size: ImageSize::new(m.width as usize, m.height as usize),
+                k: m.k,
+            })
+        }
+        (Flavor::FoxgloveJson, MessageType::Calibration) => {
+            let m: json::CameraCalibration = from_json(data, topic, "foxglove.CameraCalibration")?;
+            Ok(CalibrationMsg {
+                timestamp_ns: json_ns(m.timestamp, topic)?,
+                frame_id: m.frame_id,
+                size: ImageSize::new(m.width as usize, m.height as usize),
+                k: m.k,
+            })
+        }
+        (Flavor::Ros2Cdr, MessageType::Calibration) => {
+            let m: ros2::CameraInfo = from_cdr(data, topic, ros2::names::CAMERA_INFO)?;
+            Ok(CalibrationMsg {
+                timestamp_ns: ros_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                size: ImageSize::new(m.width as usize, m.height as usize),
+                k: m.k.to_vec(),
+            })
+        }
+        _ => Err(decode_error(
+            topic,
+            format!("expected a calibration channel, found {:?}", ct.message),
+        )),
+    }
+}
+
+fn isometry(topic: &str, t: [f64; 3], q: [f64; 4]) -> Result<Isometry3<f64>> {
+    let [x, y, z, w] = q;
+    let quaternion = nalgebra::Quaternion::new(w, x, y, z);
+    let norm = quaternion.norm();
+    // Recorders write quaternions normalised to f32 or f64 precision; anything further off
+    // than this is a wrong field, not rounding.
+    const MAX_QUATERNION_NORM_ERROR: f64 = 1e-3;
+    if !t.iter().all(|v| v.is_finite()) || !norm.is_finite() || (norm - 1.0).abs() > MAX_QUATERNION_NORM_ERROR
+    {
+        return Err(decode_error(
+            topic,
+            format!(
+                "expected a finite translation and a unit quaternion, found t = {t:?}, q (x,y,z,w) = {q:?}"
+            ),
+        ));
+    }
+    Ok(Isometry3::from_parts(
+        Translation3::new(t[0], t[1], t[2]),
+        UnitQuaternion::from_quaternion(quaternion),
+    ))
+}
+
+fn proto_pose(
+    topic: &str,
+    p: Option<&foxglove::messages::Vector3>,
+    q: Option<&foxglove::messages::Quaternion>,
+) -> Result<Isometry3<f64>> {
+    let t = p.map_or([0.0; 3], |p| [p.x, p.y, p.z]);
+    let q = q.map_or([0.0, 0.0, 0.0, 1.0], |q| [q.x, q.y, q.z, q.w]);
+    isometry(topic, t, q)
+}
+
+/// Decodes a pose-carrying message into its samples (one, or several for transform lists).
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` for invalid bytes, non-finite values or non-unit quaternions.
+pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<PoseSample>> {
+    use foxglove::messages as fm;
+    let sample = |timestamp_ns, parent: String, child: Option<String>, iso| PoseSample {
+        timestamp_ns,
+        parent_frame: parent,
+        child_frame: child,
+        parent_from_child: iso,
+    };
+    let proto_tf = |m: fm::FrameTransform| -> Result<PoseSample> {
+        let iso = proto_pose(topic, m.translation.as_ref(), m.rotation.as_ref())?;
+        Ok(sample(
+            proto_ns(m.timestamp.as_ref()),
+            m.parent_frame_id,
+            Some(m.child_frame_id),
+            iso,
+        ))
+    };
+    let json_tf = |m: json::FrameTransform| -> Result<PoseSample> {
+        let (t, q) = (m.translation, m.rotation);
+        let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+        Ok(sample(
+            json_ns(m.timestamp, topic)?,
+            m.parent_frame_id,
+            Some(m.child_frame_id),
+            iso,
+        ))
+    };
+    let ros_tf = |m: ros2::TransformStamped| -> Result<PoseSample> {
+        let (t, q) = (m.transform.translation, m.transform.rotation);
+        let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+        Ok(sample(
+            ros_ns(m.header.stamp, topic)?,
+            m.header.frame_id,
+            Some(m.child_frame_id),
+            iso,
+        ))
+    };
+    match (ct.flavor, ct.message) {
+        (Flavor::FoxgloveProtobuf, MessageType::PoseInFrame) => {
+            let m: fm::PoseInFrame = proto(data, topic, "foxglove.PoseInFrame")?;
+            let pose = m.pose.unwrap_or_default();
+            let iso = proto_pose(topic, pose.position.as_ref(), pose.orientation.as_ref())?;
+            Ok(vec![sample(
+                proto_ns(m.timestamp.as_ref()),
+                m.frame_id,
+                None,
+                iso,
+            )])
+        }
+        (Flavor::FoxgloveProtobuf, MessageType::FrameTransform) => {
+            Ok(vec![proto_tf(proto(data, topic, "foxglove.FrameTransform")?)?])
+        }
+        (Flavor::FoxgloveProtobuf, MessageType::FrameTransforms) => {
+            let m: fm::FrameTransforms = proto(data, topic, "foxglove.FrameTransforms")?;
+            m.transforms.into_iter().map(proto_tf).collect()
+        }
+        (Flavor::FoxgloveJson, MessageType::PoseInFrame) => {
+            let m: json::PoseInFrame = from_json(data, topic, "foxglove.PoseInFrame")?;
+            let (t, q) = (m.pose.position, m.pose.orientation);
+            let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+            Ok(vec![sample(json_ns(m.timestamp, topic)?, m.frame_id, None, iso)])
+        }
+        (Flavor::FoxgloveJson, MessageType::FrameTransform) => {
+            Ok(vec![json_tf(from_json(data, topic, "foxglove.FrameTransform")?)?])
+        }
+        (Flavor::FoxgloveJson, MessageType::FrameTransforms) => {
+            let m: json::FrameTransforms = from_json(data, topic, "foxglove.FrameTransforms")?;
+            m.transforms.into_iter().map(json_tf).collect()
+        }
+        (Flavor::Ros2Cdr, MessageType::PoseInFrame) => {
+            let m: ros2::PoseStamped = from_cdr(data, topic, ros2::names::POSE_STAMPED)?;
+            let (t, q) = (m.pose.position, m.pose.orientation);
+            let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+            Ok(vec![sample(
+                ros_ns(m.header.stamp, topic)?,
+                m.header.frame_id,
+                None,
+                iso,
+            )])
+        }
+        (Flavor::Ros2Cdr, MessageType::FrameTransform) => Ok(vec![ros_tf(from_cdr(
+            data,
+            topic,
+            ros2::names::TRANSFORM_STAMPED,
+        )?)?]),
+        (Flavor::Ros2Cdr, MessageType::FrameTransforms) => {
+            let m: ros2::TfMessage = from_cdr(data, topic, ros2::names::TF_MESSAGE)?;
+            m.transforms.into_iter().map(ros_tf).collect()
+        }
+        _ => Err(decode_error(
+            topic,
+            format!("expected a pose or transform channel, found {:?}", ct.message),
+        )),
+    }
+}
+
+/// Colour encodings accepted by [`gray_from_image_into`].
+pub const SUPPORTED_COLOR_ENCODINGS: &str = "rgb8, bgr8, rgba8, bgra8, mono8/8UC1, PNG, JPEG";
+/// Depth encodings accepted by [`depth_from_image_into`].
+pub const SUPPORTED_DEPTH_ENCODINGS: &str =
+    "16UC1/mono16 (raw units), 32FC1 (metres), compressedDepth PNG (16UC1)";
+
+/// Header bytes `compressed_depth_image_transport` puts before the PNG of a 16-bit depth
+/// image (format enum + two float quantisation parameters; ecosystem.md §3.2).
+const COMPRESSED_DEPTH_HEADER_BYTES: usize = 12;
+
+fn unsupported(topic: &str, what: &str, found: &str, supported: &str) -> Error {
+    decode_error(
+        topic,
+        format!("unsupported {what} encoding {found:?}: supported are {supported}"),
+    )
+}
+
+/// Checks row step and data length of a raw image; returns its size.
+fn raw_rows(topic: &str, width: u32, height: u32, step: u32, bpp: usize, len: usize) -> Result<ImageSize> {
+    let size = ImageSize::new(width as usize, height as usize);
+    let row_bytes = size.width * bpp;
+    let step = step as usize;
+    if step < row_bytes {
+        return Err(decode_error(
+            topic,
+            format!(
+                "image step {step} is shorter than a {}-pixel row of {row_bytes} bytes",
+                size.width
+            ),
+        ));
+    }
+    let needed = if size.height == 0 {
+        0
+    } else {
+        step * (size.height - 1) + row_bytes
+    };
+    if len < needed {
+        return Err(decode_error(
+            topic,
+            format!("image {size} with step {step} needs {needed} bytes, found {len}"),
+        ));
+    }
+    Ok(size)
+}
+
+fn resize_for<T: Copy + Default>(image: &mut crate::image_buf::Image<T>, size: ImageSize) {
+    if image.size() != size {
+        *image = crate::image_buf::Image::filled(size, T::default());
+    }
+}
+
+/// Decodes a colour (or grey) image into `gray` (0..1, BT.601 luma, the same weights as
+/// [`crate::image_buf::gray_from_rgb8`]), resizing `gray` when the size differs.
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` for unsupported encodings (listing the supported ones),
+/// short buffers or undecodable PNG/JPEG.
+pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> Result<()> {
+    let [wr, wg, wb] = LUMA_WEIGHTS_BT601.map(|w| w / 255.0);
+    match &msg.payload {
+        ImagePayload::Raw {
+            width,
+            height,
+            encoding,
+            step,
+            data,
+            ..
+        } => {
+            // (bytes per pixel, offsets of r, g, b); grey images use one channel three times.
+            let (bpp, [r, g, b]) = match encoding.as_str() {
+                "rgb8" => (3, [0, 1, 2]),
+                "bgr8" | "8UC3" => (3, [2, 1, 0]),
+                "rgba8" => (4, [0, 1, 2]),
+                "bgra8" | "8UC4" => (4, [2, 1, 0]),
+                "mono8" | "8UC1" => (1, [0, 0, 0]),
+                other => return Err(unsupported(topic, "colour", other, SUPPORTED_COLOR_ENCODINGS)),
+            };
+            let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
+            resize_for(gray, size);
+            let step = *step as usize;
+            for y in 0..size.height {
+                let row = &data[y * step..y * step + size.width * bpp];
+                for (out, px) in gray.row_mut(y).iter_mut().zip(row.chunks_exact(bpp)) {
+                    *out = if bpp == 1 {
+                        f32::from(px[0]) / 255.0
+                    } else {
+                        wr * f32::from(px[r]) + wg * f32::from(px[g]) + wb * f32::from(px[b])
+                    };
+                }
+            }
+            Ok(())
+        }
+        ImagePayload::Compressed { format, data } => {
+            let lower = format.to_ascii_lowercase();
+            let image_format = if lower.contains("png") {
+                image::ImageFormat::Png
+            } else if lower.contains("jpeg") || lower.contains("jpg") {
+                image::ImageFormat::Jpeg
+            } else {
+                return Err(unsupported(topic, "colour", format, SUPPORTED_COLOR_ENCODINGS));
+            };
+            let decoded = image::load_from_memory_with_format(data, image_format)
+                .map_err(|e| decode_error(topic, format!("cannot decode {format} image: {e}")))?;
+            let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
+            resize_for(gray, size);
+            if decoded.color().channel_count() <= 2 {
+                let luma = decoded.into_luma8();
+                for (out, v) in gray.as_mut_slice().iter_mut().zip(luma.as_raw()) {
+                    *out = f32::from(*v) / 255.0;
+                }
+            } else {
+                let rgb = decoded.into_rgb8();
+                for (out, px) in gray.as_mut_slice().iter_mut().zip(rgb.as_raw().chunks_exact(3)) {
+                    *out = wr * f32::from(px[0]) + wg * f32::from(px[1]) + wb * f32::from(px[2]);
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Decodes a depth image into metres (0 = invalid), resizing `depth_m` when needed.
+/// `units_per_meter` scales 16-bit encodings; `32FC1` is metres already (NaN, ±inf and
+/// negative values become 0).
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` for unsupported encodings (listing the supported ones),
+/// short buffers or an undecodable compressedDepth PNG.
+pub fn depth_from_image_into(
+    msg: &ImageMsg,
+    topic: &str,
+    units_per_meter: f64,
+    depth_m: &mut DepthMeters,
+) -> Result<()> {
+    let scale = (1.0 / units_per_meter) as f32;
+    match &msg.payload {
+        ImagePayload::Raw {
+            width,
+            height,
+            encoding,
+            step,
+            big_endian,
+            data,
+        } => {
+            let bpp = match encoding.as_str() {
+                "16UC1" | "mono16" => 2,
+                "32FC1" => 4,
+                other => return Err(unsupported(topic, "depth", other, SUPPORTED_DEPTH_ENCODINGS)),
+            };
+            let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
+            resize_for(depth_m, size);
+            let step = *step as usize;
+            for y in 0..size.height {
+                let row = &data[y * step..y * step + size.width * bpp];
+                let out = depth_m.row_mut(y);
+                if bpp == 2 {
+                    for (o, b) in out.iter_mut().zip(row.chunks_exact(2)) {
+                        let raw = if *big_endian {
+                            u16::from_be_bytes([b[0], b[1]])
+                        } else {
+                            u16::from_le_bytes([b[0], b[1]])
+                        };
+                        *o = f32::from(raw) * scale;
+                    }
+                } else {
+                    for (o, b) in out.iter_mut().zip(row.chunks_exact(4)) {
+                        let bytes = [b[0], b[1], b[2], b[3]];
+                        let v = if *big_endian {
+                            f32::from_be_bytes(bytes)
+                        } else {
+                            f32::from_le_bytes(bytes)
+                        };
+                        *o = if v.is_finite() && v > 0.0 { v } else { 0.0 };
+                    }
+                }
+            }
+            Ok(())
+        }
+        ImagePayload::Compressed { format, data } => {
+            if !format.contains("compressedDepth") || !format.starts_with("16UC1") {
+                return Err(unsupported(topic, "depth", format, SUPPORTED_DEPTH_ENCODINGS));
+            }
+            let png = data.get(COMPRESSED_DEPTH_HEADER_BYTES..).unwrap_or_default();
+            let decoded = image::load_from_memory_with_format(png, image::ImageFormat::Png)
+                .map_err(|e| decode_error(topic, format!("cannot decode {format} depth PNG: {e}")))?
+                .into_luma16();
+            let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
+            resize_for(depth_m, size);
+            for (o, v) in depth_m.as_mut_slice().iter_mut().zip(decoded.as_raw()) {
+                *o = f32::from(*v) * scale;
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Encodes a message to protobuf bytes (helper for fixtures and tests).
+pub fn protobuf_bytes<M: prost::Message>(msg: &M) -> Vec<u8> {
+    msg.encode_to_vec()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn raw(encoding: &str, width: u32, bpp: u32, data: Vec<u8>) -> ImageMsg {
+        ImageMsg {
+            timestamp_ns: 1,
+            frame_id: "cam".into(),
+            payload: ImagePayload::Raw {
+                width,
+                height: 1,
+                encoding: encoding.into(),
+                step: width * bpp,
+                big_endian: false,
+                data,
+            },
+        }
+    }
+
+    #[test]
+    fn colour_orders_give_the_same_gray() {
+        let rgb = raw("rgb8", 2, 3, vec![10, 200, 30, 255, 0, 128]);
+        let bgr = raw("bgr8", 2, 3, vec![30, 200, 10, 128, 0, 255]);
+        let bgra = raw("bgra8", 2, 4, vec![30, 200, 10, 9, 128, 0, 255, 9]);
+        let mut a = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        let mut b = a.clone();
+        let mut c = a.clone();
+        gray_from_image_into(&rgb, "/c", &mut a).unwrap();
+        gray_from_image_into(&bgr, "/c", &mut b).unwrap();
+        gray_from_image_into(&bgra, "/c", &mut c).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(a, c);
+        let reference = crate::image_buf::gray_from_rgb8(&crate::image_buf::Rgb8::from_fn(
+            ImageSize::new(2, 1),
+            |x, _| if x == 0 { [10, 200, 30] } else { [255, 0, 128] },
+        ));
+        assert_eq!(a, reference);
+    }
+
+    #[test]
+    fn depth_encodings_agree_in_metres() {
+        let mm: Vec<u8> = [1500u16, 0].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let m: Vec<u8> = [1.5f32, f32::NAN].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let mut a = DepthMeters::filled(ImageSize::new(2, 1), 9.0);
+        let mut b = a.clone();
+        depth_from_image_into(&raw("16UC1", 2, 2, mm), "/d", 1000.0, &mut a).unwrap();
+        depth_from_image_into(&raw("32FC1", 2, 4, m), "/d", 1000.0, &mut b).unwrap();
+        assert_eq!(a.as_slice(), &[1.5, 0.0]);
+        assert_eq!(b.as_slice(), &[1.5, 0.0]);
+    }
+
+    #[test]
+    fn unsupported_encodings_are_named() {
+        let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        let err = gray_from_image_into(&raw("yuv422", 2, 2, vec![0; 4]), "/c", &mut g)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("yuv422") && err.contains("rgb8") && err.contains("/c"),
+            "{err}"
+        );
+        let mut d = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
+        let err = depth_from_image_into(&raw("8UC1", 2, 1, vec![0; 2]), "/d", 1.0, &mut d)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("8UC1") && err.contains("32FC1"), "{err}");
+    }
+
+    #[test]
+    fn ros2_image_decodes_from_cdr() {
+        let msg = ros2::Image {
+            header: ros2::Header {
+                stamp: ros2::Time {
+                    sec: 12,
+                    nanosec: 345,
+                },
+                frame_id: "cam".into(),
+            },
+            height: 1,
+            width: 2,
+            encoding: "16UC1".into(),
+            is_bigendian: 0,
+            step: 4,
+            data: vec![1, 0, 2, 0],
+        };
+        let bytes = cdr::serialize::<_, _, cdr::CdrLe>(&msg, cdr::Infinite).unwrap();
+        assert_eq!(&bytes[..4], &[0, 1, 0, 0]);
+        let ct = ChannelType::classify(ros2::names::IMAGE, "cdr").unwrap();
+        let img = decode_image(ct, "/d", &bytes).unwrap();
+        assert_eq!(img.timestamp_ns, 12_000_000_345);
+        assert!(img.is_depth());
+        let mut d = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
+        depth_from_image_into(&img, "/d", 1.0, &mut d).unwrap();
+        assert_eq!(d.as_slice(), &[1.0, 2.0]);
+    }
+
+    #[test]
+    fn json_calibration_uses_upper_case_fields() {
+        let text = br#"{"timestamp":{"sec":1,"nsec":2},"frame_id":"c","width":4,"height":3,
+            "distortion_model":"plumb_bob","D":[],"K":[500,0,2,0,501,1.5,0,0,1],"R":[],"P":[]}"#;
+        let ct = ChannelType::classify("foxglove.CameraCalibration", "json").unwrap();
+        let c = decode_calibration(ct, "/ci", text).unwrap();
+        assert_eq!(c.timestamp_ns, 1_000_000_002);
+        let k = c.intrinsics("/ci").unwrap();
+        assert_eq!((k.fx, k.fy, k.cx, k.cy), (500.0, 501.0, 2.0, 1.5));
+        let zero = CalibrationMsg { k: vec![0.0; 9], ..c };
+        assert!(zero
+            .intrinsics("/ci")
+            .unwrap_err()
+            .to_string()
+            .contains("--camera"));
+    }
+
+    #[test]
+    fn tf_message_yields_every_transform() {
+        let tf = |child: &str, x: f64| ros2::TransformStamped {
+            header: ros2::Header {
+                stamp: ros2::Time { sec: 1, nanosec: 0 },
+                frame_id: "world".into(),
+            },
+            child_frame_id: child.into(),
+            transform: ros2::Transform {
+                translation: ros2::Point { x, y: 0.0, z: 0.0 },
+                rotation: ros2::Quaternion {
+                    w: 1.0,
+                    ..Default::default()
+                },
+            },
+        };
+        let msg = ros2::TfMessage {
+            transforms: vec![tf("a", 1.0), tf("b", 2.0)],
+        };
+        let bytes = cdr::serialize::<_, _, cdr::CdrLe>(&msg, cdr::Infinite).unwrap();
+        let ct = ChannelType::classify(ros2::names::TF_MESSAGE, "cdr").unwrap();
+        let poses = decode_poses(ct, "/tf", &bytes).unwrap();
+        assert_eq!(poses.len(), 2);
+        assert_eq!(poses[1].child_frame.as_deref(), Some("b"));
+        assert_eq!(poses[1].parent_from_child.translation.vector.x, 2.0);
+    }
+}

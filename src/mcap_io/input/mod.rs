@@ -1,0 +1,526 @@
+//! Reading any RGB-D MCAP file: Foxglove schemas in protobuf or JSON, ROS 2 messages in CDR.
+//!
+//! [`McapInput`] opens a file with bounded memory: when the file has a summary with chunk
+//! indexes, messages are read chunk by chunk in log-time order through
+//! [`mcap::sans_io::IndexedReader`]; otherwise (unfinished or unindexed recordings) a linear
+//! pass with [`mcap::sans_io::LinearReader`] first collects schemas, channels, metadata and
+//! attachments, and messages are then streamed in file order.
+//!
+//! - [`decode`]: channel classification and decoders for every supported flavour;
+//! - [`detect`]: choosing colour, depth, calibration and pose topics by schema;
+//! - [`ros2`], [`json`]: the serde layouts of ROS 2 (CDR) and Foxglove JSON messages.
+
+pub mod decode;
+pub mod detect;
+pub mod json;
+pub mod ros2;
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use mcap::records::{MessageHeader, Record};
+use mcap::sans_io::indexed_reader::ReadOrder;
+use mcap::sans_io::{
+    IndexedReadEvent, IndexedReader, IndexedReaderOptions, LinearReadEvent, LinearReader, SummaryReadEvent,
+    SummaryReader,
+};
+
+use crate::error::{Error, Result};
+
+pub use decode::{ChannelType, Flavor, MessageType};
+
+/// A schema of the input file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InputSchema {
+    /// Schema ID in the input.
+    pub id: u16,
+    /// Name (`foxglove.RawImage`, `sensor_msgs/msg/Image`, ...).
+    pub name: String,
+    /// Schema encoding (`protobuf`, `jsonschema`, `ros2msg`, ...).
+    pub encoding: String,
+    /// Schema bytes.
+    pub data: Vec<u8>,
+}
+
+/// A channel of the input file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InputChannel {
+    /// Channel ID in the input.
+    pub id: u16,
+    /// Schema ID (0 = no schema).
+    pub schema_id: u16,
+    /// Topic.
+    pub topic: String,
+    /// Message encoding (`protobuf`, `json`, `cdr`, ...).
+    pub message_encoding: String,
+    /// Channel metadata.
+    pub metadata: BTreeMap<String, String>,
+    /// Schema name, empty without a schema.
+    pub schema_name: String,
+    /// The supported type, `None` for channels occmask does not read.
+    pub channel_type: Option<ChannelType>,
+    /// Message count from the summary statistics, when present.
+    pub message_count: Option<u64>,
+}
+
+/// One message as stored: header and bytes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RawMessage {
+    /// Channel ID, sequence, log and publish time, exactly as in the input.
+    pub header: MessageHeader,
+    /// The serialised message.
+    pub data: Vec<u8>,
+}
+
+/// A metadata record or an attachment of the input.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ExtraRecord {
+    /// A metadata record.
+    Metadata(mcap::records::Metadata),
+    /// An attachment.
+    Attachment {
+        /// Log time, ns.
+        log_time: u64,
+        /// Creation time, ns.
+        create_time: u64,
+        /// Name.
+        name: String,
+        /// Media type.
+        media_type: String,
+        /// Bytes.
+        data: Vec<u8>,
+    },
+}
+
+/// Buffer size of the linear reader's file reads.
+const READ_BUFFER_BYTES: usize = 1 << 20;
+
+/// An open input MCAP file.
+pub struct McapInput {
+    path: PathBuf,
+    profile: String,
+    summary: Option<mcap::Summary>,
+    schemas: BTreeMap<u16, InputSchema>,
+    channels: BTreeMap<u16, InputChannel>,
+    /// Metadata and attachments collected by the linear scan (files without a usable summary).
+    linear_extras: Vec<ExtraRecord>,
+    /// First message of each supported channel, collected by the linear scan.
+    linear_first: BTreeMap<u16, RawMessage>,
+    file_len: u64,
+}
+
+fn mcap_error(path: &Path, message: impl Into<String>) -> Error {
+    Error::Dataset {
+        path: path.to_owned(),
+        message: message.into(),
+    }
+}
+
+fn open_file(path: &Path) -> Result<File> {
+    File::open(path).map_err(|e| Error::io("cannot open MCAP file", path, e))
+}
+
+/// Reads the summary with the sans-IO summary reader (seeks to the footer; bounded memory).
+fn read_summary(file: &mut File, path: &Path) -> Result<Option<mcap::Summary>> {
+    let mut reader = SummaryReader::new();
+    while let Some(event) = reader.next_event() {
+        match event? {
+            SummaryReadEvent::ReadRequest(n) => {
+                let read = file
+                    .read(reader.insert(n))
+                    .map_err(|e| Error::io("cannot read MCAP summary", path, e))?;
+                reader.notify_read(read);
+            }
+            SummaryReadEvent::SeekRequest(to) => {
+                let pos = file
+                    .seek(to)
+                    .map_err(|e| Error::io("cannot seek in MCAP file", path, e))?;
+                reader.notify_seeked(pos);
+            }
+        }
+    }
+    Ok(reader.finish())
+}
+
+/// Reads the header record's profile (right after the 8-byte magic).
+fn read_profile(file: &mut File, path: &Path) -> Result<String> {
+    const MAGIC_BYTES: usize = 8;
+    const RECORD_PREFIX_BYTES: usize = 9;
+    // Header records hold two short strings; anything larger is a corrupt file.
+    const MAX_HEADER_BYTES: u64 = 1 << 20;
+    file.seek(SeekFrom::Start(0))
+        .map_err(|e| Error::io("cannot seek in MCAP file", path, e))?;
+    let mut prefix = [0u8; MAGIC_BYTES + RECORD_PREFIX_BYTES];
+    file.read_exact(&mut prefix)
+        .map_err(|e| Error::io("cannot read MCAP header", path, e))?;
+    if &prefix[..MAGIC_BYTES] != mcap::MAGIC {
+        return Err(mcap_error(
+            path,
+            "not an MCAP file (expected the magic bytes \\x89MCAP0\\r\\n at the start)",
+        ));
+    }
+    let opcode = prefix[MAGIC_BYTES];
+    let mut len_bytes = [0u8; 8];
+    len_bytes.copy_from_slice(&prefix[MAGIC_BYTES + 1..]);
+    let len = u64::from_le_bytes(len_bytes);
+    if opcode != mcap::records::op::HEADER || len > MAX_HEADER_BYTES {
+        return Err(mcap_error(path, "MCAP file does not start with a header record"));
+    }
+    let mut body = vec![0u8; len as usize];
+    file.read_exact(&mut body)
+        .map_err(|e| Error::io("cannot read MCAP header", path, e))?;
+    match mcap::parse_record(opcode, &body)? {
+        Record::Header(h) => Ok(h.profile),
+        _ => Err(mcap_error(path, "MCAP file does not start with a header record")),
+    }
+}
+
+/// Drives a [`LinearReader`] over a file, calling `f` for every record.
+fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> Result<()> {
+    let mut file = BufReader::with_capacity(READ_BUFFER_BYTES, open_file(path)?);
+    let mut reader = LinearReader::new();
+    while let Some(event) = reader.next_event() {
+        match event? {
+            LinearReadEvent::ReadRequest(n) => {
+                let read = file
+                    .read(reader.insert(n))
+                    .map_err(|e| Error::io("cannot read MCAP file", path, e))?;
+                reader.notify_read(read);
+            }
+            LinearReadEvent::Record { data, opcode } => f(mcap::parse_record(opcode, data)?)?,
+        }
+    }
+    Ok(())
+}
+
+impl McapInput {
+    /// Opens `path`: reads the header and summary, or scans the file linearly when it has no
+    /// summary (or no chunk indexes).
+    ///
+    /// # Errors
+    /// [`Error::Io`] when the file cannot be read; [`Error::Dataset`] when it is not MCAP;
+    /// [`Error::Mcap`] for corrupt records.
+    pub fn open(path: &Path) -> Result<Self> {
+        let mut file = open_file(path)?;
+        let file_len = file
+            .metadata()
+            .map_err(|e| Error::io("cannot stat MCAP file", path, e))?
+            .len();
+        let profile = read_profile(&mut file, path)?;
+        // A file without its footer (killed recorder) makes the summary reader fail: that is
+        // the linear fallback's case, not an error.
+        let summary = read_summary(&mut file, path).ok().flatten().filter(|s| {
+            !s.chunk_indexes.is_empty() || s.stats.as_ref().is_some_and(|s| s.message_count == 0)
+        });
+        let mut input = Self {
+            path: path.to_owned(),
+            profile,
+            summary,
+            schemas: BTreeMap::new(),
+            channels: BTreeMap::new(),
+            linear_extras: Vec::new(),
+            linear_first: BTreeMap::new(),
+            file_len,
+        };
+        if let Some(summary) = &input.summary {
+            for (id, s) in &summary.schemas {
+                input.schemas.insert(
+                    *id,
+                    InputSchema {
+                        id: *id,
+                        name: s.name.clone(),
+                        encoding: s.encoding.clone(),
+                        data: s.data.to_vec(),
+                    },
+                );
+            }
+            let counts = summary.stats.as_ref().map(|s| &s.channel_message_counts);
+            for (id, c) in &summary.channels {
+                let count = counts.map(|m| m.get(id).copied().unwrap_or(0));
+                input.channels.insert(*id, channel_info(c, count));
+            }
+        } else {
+            input.linear_scan()?;
+        }
+        Ok(input)
+    }
+
+    fn linear_scan(&mut self) -> Result<()> {
+        let path = self.path.clone();
+        let mut schemas = BTreeMap::new();
+        let mut channels: BTreeMap<u16, InputChannel> = BTreeMap::new();
+        let mut extras = Vec::new();
+        let mut first = BTreeMap::new();
+        let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
+        linear_records(&path, |record| {
+            match record {
+                Record::Schema { header, data } => {
+                    schemas.insert(
+                        header.id,
+                        InputSchema {
+                            id: header.id,
+                            name: header.name,
+                            encoding: header.encoding,
+                            data: data.into_owned(),
+                        },
+                    );
+                }
+                Record::Channel(c) => {
+                    let schema_name = schemas
+                        .get(&c.schema_id)
+                        .map(|s: &InputSchema| s.name.clone())
+                        .unwrap_or_default();
+                    let channel_type = ChannelType::classify(&schema_name, &c.message_encoding);
+                    channels.insert(
+                        c.id,
+                        InputChannel {
+                            id: c.id,
+                            schema_id: c.schema_id,
+                            topic: c.topic,
+                            message_encoding: c.message_encoding,
+                            metadata: c.metadata,
+                            schema_name,
+                            channel_type,
+                            message_count: None,
+                        },
+                    );
+                }
+                Record::Message { header, data } => {
+                    *counts.entry(header.channel_id).or_default() += 1;
+                    let wanted = channels
+                        .get(&header.channel_id)
+                        .and_then(|c| c.channel_type)
+                        .is_some();
+                    if wanted && !first.contains_key(&header.channel_id) {
+                        first.insert(
+                            header.channel_id,
+                            RawMessage {
+                                header,
+                                data: data.into_owned(),
+                            },
+                        );
+                    }
+                }
+                Record::Metadata(m) => extras.push(ExtraRecord::Metadata(m)),
+                Record::Attachment { header, data, .. } => extras.push(ExtraRecord::Attachment {
+                    log_time: header.log_time,
+                    create_time: header.create_time,
+                    name: header.name,
+                    media_type: header.media_type,
+                    data: data.into_owned(),
+                }),
+                _ => {}
+            }
+            Ok(())
+        })?;
+        for (id, c) in &mut channels {
+            c.message_count = Some(counts.get(id).copied().unwrap_or(0));
+        }
+        self.schemas = schemas;
+        self.channels = channels;
+        self.linear_extras = extras;
+        self.linear_first = first;
+        Ok(())
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// File size in bytes.
+    pub fn file_len(&self) -> u64 {
+        self.file_len
+    }
+
+    /// The header's profile (`ros2`, empty, ...).
+    pub fn profile(&self) -> &str {
+        &self.profile
+    }
+
+    /// True when messages are read through the summary's indexes (log-time order).
+    pub fn is_indexed(&self) -> bool {
+        self.summary.is_some()
+    }
+
+    /// Total messages, when known from the summary or the linear scan.
+    pub fn message_count(&self) -> Option<u64> {
+        self.channels.values().map(|c| c.message_count).sum()
+    }
+
+    /// Schemas by ID.
+    pub fn schemas(&self) -> &BTreeMap<u16, InputSchema> {
+        &self.schemas
+    }
+
+    /// Channels by ID.
+    pub fn channels(&self) -> &BTreeMap<u16, InputChannel> {
+        &self.channels
+    }
+
+    /// The channel with `topic` (the lowest ID when several share it).
+    pub fn channel_by_topic(&self, topic: &str) -> Option<&InputChannel> {
+        self.channels.values().find(|c| c.topic == topic)
+    }
+
+    /// The first message (in log-time order) on channel `id`.
+    ///
+    /// # Errors
+    /// I/O and MCAP errors.
+    pub fn first_message(&self, id: u16) -> Result<Option<RawMessage>> {
+        if self.summary.is_none() {
+            return Ok(self.linear_first.get(&id).cloned());
+        }
+        let Some(channel) = self.channels.get(&id) else {
+            return Ok(None);
+        };
+        let mut found = None;
+        self.for_each_message(Some(&[channel.topic.clone()]), None, |m| {
+            if m.header.channel_id == id {
+                found = Some(m);
+                return Ok(false);
+            }
+            Ok(true)
+        })?;
+        Ok(found)
+    }
+
+    /// Metadata records and attachments, in file order.
+    ///
+    /// # Errors
+    /// I/O and MCAP errors.
+    pub fn extras(&self) -> Result<Vec<ExtraRecord>> {
+        let Some(summary) = &self.summary else {
+            return Ok(self.linear_extras.clone());
+        };
+        let mut file = open_file(&self.path)?;
+        let mut spans: Vec<(u64, u64)> = summary
+            .metadata_indexes
+            .iter()
+            .map(|i| (i.offset, i.length))
+            .chain(summary.attachment_indexes.iter().map(|i| (i.offset, i.length)))
+            .collect();
+        spans.sort_unstable();
+        let mut out = Vec::with_capacity(spans.len());
+        for (offset, length) in spans {
+            const RECORD_PREFIX_BYTES: u64 = 9;
+            if length < RECORD_PREFIX_BYTES || offset.saturating_add(length) > self.file_len {
+                return Err(mcap_error(
+                    &self.path,
+                    "metadata or attachment index points outside the file",
+                ));
+            }
+            let mut buf = vec![0u8; length as usize];
+            file.seek(SeekFrom::Start(offset))
+                .and_then(|_| file.read_exact(&mut buf))
+                .map_err(|e| Error::io("cannot read MCAP record", &self.path, e))?;
+            match mcap::parse_record(buf[0], &buf[RECORD_PREFIX_BYTES as usize..])? {
+                Record::Metadata(m) => out.push(ExtraRecord::Metadata(m)),
+                Record::Attachment { header, data, .. } => out.push(ExtraRecord::Attachment {
+                    log_time: header.log_time,
+                    create_time: header.create_time,
+                    name: header.name,
+                    media_type: header.media_type,
+                    data: data.into_owned(),
+                }),
+                _ => {
+                    return Err(mcap_error(
+                        &self.path,
+                        "metadata or attachment index points at another record",
+                    ))
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Calls `f` for every message (only `topics` when given; only log times in
+    /// `[start, end)` when `time_range` is given), in log-time order for indexed files and file
+    /// order otherwise. `f` returns `false` to stop early.
+    ///
+    /// # Errors
+    /// I/O and MCAP errors, or the first error `f` returns.
+    pub fn for_each_message(
+        &self,
+        topics: Option<&[String]>,
+        time_range: Option<(u64, u64)>,
+        mut f: impl FnMut(RawMessage) -> Result<bool>,
+    ) -> Result<()> {
+        let wanted_ids: Option<Vec<u16>> = topics.map(|topics| {
+            self.channels
+                .values()
+                .filter(|c| topics.contains(&c.topic))
+                .map(|c| c.id)
+                .collect()
+        });
+        let in_range = |t: u64| time_range.is_none_or(|(s, e)| t >= s && t < e);
+        let Some(summary) = &self.summary else {
+            let mut stopped = false;
+            return linear_records(&self.path, |record| {
+                if stopped {
+                    return Ok(());
+                }
+                if let Record::Message { header, data } = record {
+                    let wanted = wanted_ids
+                        .as_ref()
+                        .is_none_or(|ids| ids.contains(&header.channel_id));
+                    if wanted && in_range(header.log_time) {
+                        stopped = !f(RawMessage {
+                            header,
+                            data: data.into_owned(),
+                        })?;
+                    }
+                }
+                Ok(())
+            });
+        };
+        let mut options = IndexedReaderOptions::new().with_order(ReadOrder::LogTime);
+        if let Some(topics) = topics {
+            options = options.include_topics(topics.iter().cloned());
+        }
+        if let Some((start, end)) = time_range {
+            options = options.starting_at(start).ending_before(end);
+        }
+        let mut reader = IndexedReader::new_with_options(summary, options)?;
+        let mut file = open_file(&self.path)?;
+        let mut chunk = Vec::new();
+        while let Some(event) = reader.next_event() {
+            match event? {
+                IndexedReadEvent::ReadChunkRequest { offset, length } => {
+                    chunk.resize(length, 0);
+                    file.seek(SeekFrom::Start(offset))
+                        .and_then(|_| file.read_exact(&mut chunk))
+                        .map_err(|e| Error::io("cannot read MCAP chunk", &self.path, e))?;
+                    reader.insert_chunk_record_data(offset, &chunk)?;
+                }
+                IndexedReadEvent::Message { header, data } => {
+                    let keep_going = f(RawMessage {
+                        header,
+                        data: data.to_vec(),
+                    })?;
+                    if !keep_going {
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn channel_info(c: &Arc<mcap::Channel<'static>>, count: Option<u64>) -> InputChannel {
+    let schema_name = c.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default();
+    InputChannel {
+        id: c.id,
+        schema_id: c.schema.as_ref().map_or(0, |s| s.id),
+        topic: c.topic.clone(),
+        message_encoding: c.message_encoding.clone(),
+        metadata: c.metadata.clone(),
+        channel_type: ChannelType::classify(&schema_name, &c.message_encoding),
+        schema_name,
+        message_count: count,
+    }
+}
