@@ -9,12 +9,14 @@
 //! 5. the command-line interface (in the binary).
 #![deny(missing_docs)]
 
+pub mod contour;
 pub mod convert;
 pub mod dataset;
 pub mod error;
 pub mod geometry;
 pub mod image_buf;
 pub mod mcap_io;
+pub mod process;
 pub mod time;
 pub mod trajectory;
 

@@ -11,6 +11,7 @@
 //! - [`reader`]: [`McapFileReader`] for files this crate wrote;
 //! - [`output`]: [`AtomicOutput`], the temporary-file-then-rename helper every command uses.
 
+pub mod annotate;
 pub mod codec;
 pub mod input;
 pub mod output;

@@ -1,0 +1,480 @@
+//! [`AnnotatedWriter`]: the output of `occmask process`, an annotated copy of an input file
+//! (or a sidecar with only the new channels).
+//!
+//! Copy mode registers every input schema and channel under its own ID first
+//! (`add_schema_with_id`/`add_channel_with_id`: registering new channels before them makes
+//! mcap 0.26 panic on ID collisions, ecosystem.md §1.3), copies metadata and attachments,
+//! then the new schemas and channels get the next free IDs. Input messages are written with
+//! their original header (channel, sequence, log and publish time) and bytes.
+//!
+//! New channels (all protobuf Foxglove schemas except the stats):
+//!
+//! | topic | schema |
+//! |---|---|
+//! | [`TOPIC_MASK`] | `foxglove.RawImage` `mono8`, 255 = moving, colour image's stamp and frame |
+//! | [`TOPIC_MASK_ANNOTATIONS`] | `foxglove.ImageAnnotations`, outlines with translucent fill |
+//! | [`TOPIC_ODOMETRY`] | `foxglove.PoseInFrame` in [`FRAME_WORLD`] |
+//! | `/tf` (or [`TOPIC_TF_FALLBACK`]) | `foxglove.FrameTransform` world → [`FRAME_CAMERA_ESTIMATED`] |
+//! | [`TOPIC_PATH`] | `foxglove.PosesInFrame`, throttled trajectory so far |
+//! | [`TOPIC_ACCUMULATION`] | `foxglove.RawImage` `32FC1` accumulation map (opt-in) |
+//! | [`TOPIC_STATS`] | JSON, schema `schemas/occmask.FrameStats.json` |
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::{Seek, Write};
+
+use foxglove::messages::{
+    points_annotation, Color, ImageAnnotations, Point2, PointsAnnotation, PosesInFrame, RawImage,
+};
+use foxglove::Encode;
+use mcap::records::MessageHeader;
+use nalgebra::Isometry3;
+use prost::bytes::Bytes;
+use serde::Serialize;
+
+use crate::contour::{outer_contours, ContourOptions};
+use crate::error::{Error, Result};
+use crate::image_buf::{Image, Mask, MASK_SET};
+
+use super::codec;
+use super::input::{ExtraRecord, McapInput};
+use super::writer::{Compression, McapWriteOptions};
+use super::{ENCODING_PROTOBUF, FRAME_WORLD, LIBRARY, SCHEMA_FRAME_TRANSFORM, TOPIC_TF};
+
+/// Moving-object mask, `mono8`.
+pub const TOPIC_MASK: &str = "/occmask/mask";
+/// Outlines of the moving regions for the Image panel.
+pub const TOPIC_MASK_ANNOTATIONS: &str = "/occmask/mask_annotations";
+/// Estimated camera pose.
+pub const TOPIC_ODOMETRY: &str = "/occmask/odometry";
+/// Estimated trajectory so far (throttled).
+pub const TOPIC_PATH: &str = "/occmask/path";
+/// Accumulation map (opt-in).
+pub const TOPIC_ACCUMULATION: &str = "/occmask/accumulation";
+/// Per-frame statistics (JSON).
+pub const TOPIC_STATS: &str = "/occmask/stats";
+/// Transform topic used instead of `/tf` when the input's `/tf` has another schema (e.g. ROS 2
+/// `tf2_msgs/msg/TFMessage`), so one topic never carries two schemas.
+pub const TOPIC_TF_FALLBACK: &str = "/occmask/tf";
+/// The estimated camera frame (child of [`FRAME_WORLD`]).
+pub const FRAME_CAMERA_ESTIMATED: &str = "camera_estimated";
+/// Schema name of the stats messages.
+pub const SCHEMA_FRAME_STATS: &str = "occmask.FrameStats";
+/// The JSON Schema of [`TOPIC_STATS`] (also in `schemas/` for other tools).
+pub const FRAME_STATS_JSON_SCHEMA: &str = include_str!("../../schemas/occmask.FrameStats.json");
+/// Name of the metadata record describing the run.
+pub const METADATA_PROCESS: &str = "occmask.process";
+
+/// The path is published at most this often (data time): enough for a live-looking
+/// trajectory without one message per frame.
+pub const PATH_PUBLISH_INTERVAL_NS: u64 = 1_000_000_000;
+/// At most this many poses per path message: when the trajectory grows beyond it, every other
+/// pose is dropped (the stride doubles), so messages stay small and the file grows linearly.
+pub const MAX_PATH_POSES: usize = 512;
+
+/// Annotation fill: translucent red, so the colour image stays visible underneath.
+const FILL_COLOR: Color = Color {
+    r: 1.0,
+    g: 0.1,
+    b: 0.1,
+    a: 0.35,
+};
+/// Outline: opaque red.
+const OUTLINE_COLOR: Color = Color {
+    r: 1.0,
+    g: 0.1,
+    b: 0.1,
+    a: 1.0,
+};
+/// Outline thickness in pixels.
+const OUTLINE_THICKNESS_PX: f64 = 2.0;
+
+/// What to write.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnnotateOptions {
+    /// Copy every input schema, channel, message, metadata record and attachment (annotated
+    /// copy); `false` writes only the new channels (sidecar).
+    pub copy_input: bool,
+    /// Write [`TOPIC_ACCUMULATION`].
+    pub accumulation: bool,
+    /// Compression and chunking.
+    pub write: McapWriteOptions,
+    /// Outline extraction.
+    pub contours: ContourOptions,
+}
+
+impl Default for AnnotateOptions {
+    fn default() -> Self {
+        Self {
+            copy_input: true,
+            accumulation: false,
+            write: McapWriteOptions::default(),
+            contours: ContourOptions::default(),
+        }
+    }
+}
+
+/// JSON `{"sec", "nsec"}`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct JsonTime {
+    /// Seconds.
+    pub sec: u64,
+    /// Nanoseconds.
+    pub nsec: u32,
+}
+
+/// One `/occmask/stats` message (see `schemas/occmask.FrameStats.json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameStatsMsg {
+    /// Colour image stamp.
+    pub timestamp: JsonTime,
+    /// 0-based index of the processed pair.
+    pub frame_index: u64,
+    /// `dvo`, `dvo-unmasked` or `external`.
+    pub pose_source: String,
+    /// Outcome of the frame's odometry.
+    pub dvo_status: String,
+    /// Gauss–Newton iterations.
+    pub dvo_iterations: u32,
+    /// Final cost.
+    pub dvo_cost: f64,
+    /// Fraction of pixels marked moving.
+    pub moving_fraction: f64,
+    /// Pixels marked moving.
+    pub moving_pixels: u64,
+    /// Decode time, ms (0 unless timings are requested).
+    pub decode_ms: f64,
+    /// Processing time, ms (0 unless timings are requested).
+    pub process_ms: f64,
+}
+
+/// Everything written for one processed frame.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameAnnotation<'a> {
+    /// MCAP log time of the new messages: the colour message's log time.
+    pub log_time_ns: u64,
+    /// The colour image's own stamp (Foxglove matches annotations by it).
+    pub timestamp_ns: u64,
+    /// The colour image's frame.
+    pub frame_id: &'a str,
+    /// Moving mask (0 / 255).
+    pub mask: &'a Mask,
+    /// Estimated pose.
+    pub world_from_camera: &'a Isometry3<f64>,
+    /// Accumulation map, written when enabled.
+    pub accumulation: Option<&'a Image<f32>>,
+    /// Statistics.
+    pub stats: &'a FrameStatsMsg,
+}
+
+struct NewChannels {
+    mask: u16,
+    annotations: u16,
+    odometry: u16,
+    tf: u16,
+    path: u16,
+    accumulation: Option<u16>,
+    stats: u16,
+}
+
+/// Writes an annotated copy or a sidecar; see the module documentation.
+pub struct AnnotatedWriter<W: Write + Seek> {
+    writer: mcap::Writer<W>,
+    channels: NewChannels,
+    sequences: HashMap<u16, u32>,
+    contours: ContourOptions,
+    path: Vec<foxglove::messages::Pose>,
+    path_stride: usize,
+    path_frames_seen: usize,
+    last_path_publish_ns: Option<u64>,
+    copied_messages: u64,
+    new_messages: u64,
+    scratch: Vec<u8>,
+}
+
+/// The transform topic to write for `input`: `/tf` unless the input has a `/tf` channel with
+/// another schema than protobuf `foxglove.FrameTransform`.
+pub fn tf_topic_for(input: &McapInput) -> &'static str {
+    let clash = input.channels().values().any(|c| {
+        c.topic == TOPIC_TF
+            && (c.schema_name != SCHEMA_FRAME_TRANSFORM || c.message_encoding != ENCODING_PROTOBUF)
+    });
+    if clash {
+        TOPIC_TF_FALLBACK
+    } else {
+        TOPIC_TF
+    }
+}
+
+fn schema_of<T: Encode>() -> Result<foxglove::Schema> {
+    T::get_schema().ok_or_else(|| Error::InvalidParameter {
+        name: "schema",
+        value: std::any::type_name::<T>().into(),
+        expected: "a Foxglove message type with an embedded schema".into(),
+    })
+}
+
+impl<W: Write + Seek> AnnotatedWriter<W> {
+    /// Starts the output on `sink`: header, input schemas/channels, metadata and attachments
+    /// (copy mode), then the new schemas and channels.
+    ///
+    /// # Errors
+    /// [`Error::Mcap`] when a record cannot be written; I/O errors reading the input's extras.
+    pub fn new(sink: W, input: &McapInput, options: &AnnotateOptions) -> Result<Self> {
+        let compression = match options.write.compression {
+            Compression::Zstd => Some(mcap::Compression::Zstd),
+            Compression::Lz4 => Some(mcap::Compression::Lz4),
+            Compression::None => None,
+        };
+        let profile = if options.copy_input { input.profile() } else { "" };
+        let mut writer = mcap::WriteOptions::new()
+            .library(LIBRARY)
+            .profile(profile)
+            .compression(compression)
+            .chunk_size(Some(options.write.chunk_size_bytes))
+            .compression_threads(options.write.compression_threads)
+            .create(sink)?;
+        if options.copy_input {
+            for s in input.schemas().values() {
+                writer.add_schema_with_id(s.id, &s.name, &s.encoding, &s.data)?;
+            }
+            for c in input.channels().values() {
+                writer.add_channel_with_id(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
+            }
+            for extra in input.extras()? {
+                match extra {
+                    ExtraRecord::Metadata(m) => writer.write_metadata(&m)?,
+                    ExtraRecord::Attachment {
+                        log_time,
+                        create_time,
+                        name,
+                        media_type,
+                        data,
+                    } => writer.attach(&mcap::Attachment {
+                        log_time,
+                        create_time,
+                        name,
+                        media_type,
+                        data: std::borrow::Cow::Owned(data),
+                    })?,
+                }
+            }
+        }
+        let mut add = |topic: &str, schema: foxglove::Schema| -> Result<u16> {
+            let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
+            Ok(writer.add_channel(schema_id, topic, ENCODING_PROTOBUF, &BTreeMap::new())?)
+        };
+        let raw_image = schema_of::<RawImage>()?;
+        let mask = add(TOPIC_MASK, raw_image.clone())?;
+        let annotations = add(TOPIC_MASK_ANNOTATIONS, schema_of::<ImageAnnotations>()?)?;
+        let odometry = add(TOPIC_ODOMETRY, schema_of::<foxglove::messages::PoseInFrame>()?)?;
+        let tf = add(
+            tf_topic_for(input),
+            schema_of::<foxglove::messages::FrameTransform>()?,
+        )?;
+        let path = add(TOPIC_PATH, schema_of::<PosesInFrame>()?)?;
+        let accumulation = if options.accumulation {
+            Some(add(TOPIC_ACCUMULATION, raw_image)?)
+        } else {
+            None
+        };
+        let stats_schema = writer.add_schema(
+            SCHEMA_FRAME_STATS,
+            "jsonschema",
+            FRAME_STATS_JSON_SCHEMA.as_bytes(),
+        )?;
+        let stats = writer.add_channel(stats_schema, TOPIC_STATS, "json", &BTreeMap::new())?;
+        Ok(Self {
+            writer,
+            channels: NewChannels {
+                mask,
+                annotations,
+                odometry,
+                tf,
+                path,
+                accumulation,
+                stats,
+            },
+            sequences: HashMap::new(),
+            contours: options.contours,
+            path: Vec::new(),
+            path_stride: 1,
+            path_frames_seen: 0,
+            last_path_publish_ns: None,
+            copied_messages: 0,
+            new_messages: 0,
+            scratch: Vec::new(),
+        })
+    }
+
+    /// Copies an input message unchanged (header and bytes).
+    ///
+    /// # Errors
+    /// [`Error::Mcap`] on write failure or an unknown channel (sidecar mode).
+    pub fn copy_message(&mut self, header: &MessageHeader, data: &[u8]) -> Result<()> {
+        self.writer.write_to_known_channel(header, data)?;
+        self.copied_messages += 1;
+        Ok(())
+    }
+
+    fn write_new(&mut self, channel_id: u16, log_time_ns: u64, encoded: Option<&[u8]>) -> Result<()> {
+        let sequence = self.sequences.entry(channel_id).or_insert(0);
+        let header = MessageHeader {
+            channel_id,
+            sequence: *sequence,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+        };
+        *sequence = sequence.wrapping_add(1);
+        let data = encoded.unwrap_or(&self.scratch);
+        self.writer.write_to_known_channel(&header, data)?;
+        self.new_messages += 1;
+        Ok(())
+    }
+
+    fn write_proto<M: Encode>(&mut self, channel_id: u16, log_time_ns: u64, msg: &M) -> Result<()> {
+        self.scratch.clear();
+        msg.encode(&mut self.scratch).map_err(|e| Error::Decode {
+            topic: format!("channel {channel_id}"),
+            message: format!("cannot encode message: {e}"),
+        })?;
+        self.write_new(channel_id, log_time_ns, None)
+    }
+
+    /// Writes the new messages of one frame.
+    ///
+    /// # Errors
+    /// [`Error::Mcap`] on write failure.
+    pub fn write_frame(&mut self, frame: &FrameAnnotation<'_>) -> Result<()> {
+        let t = frame.log_time_ns;
+        let stamp = codec::timestamp(frame.timestamp_ns);
+        let mask_msg = codec::mask_image(frame.timestamp_ns, frame.frame_id, frame.mask)?;
+        self.write_proto(self.channels.mask, t, &mask_msg)?;
+
+        let annotations = ImageAnnotations {
+            timestamp: Some(stamp),
+            points: outer_contours(frame.mask, &self.contours)
+                .into_iter()
+                .map(|polygon| PointsAnnotation {
+                    timestamp: Some(stamp),
+                    r#type: points_annotation::Type::LineLoop as i32,
+                    points: polygon.into_iter().map(|[x, y]| Point2 { x, y }).collect(),
+                    outline_color: Some(OUTLINE_COLOR),
+                    outline_colors: Vec::new(),
+                    fill_color: Some(FILL_COLOR),
+                    thickness: OUTLINE_THICKNESS_PX,
+                    metadata: Vec::new(),
+                })
+                .collect(),
+            ..Default::default()
+        };
+        self.write_proto(self.channels.annotations, t, &annotations)?;
+
+        let pose = codec::pose_in_frame(frame.timestamp_ns, FRAME_WORLD, frame.world_from_camera);
+        self.write_proto(self.channels.odometry, t, &pose)?;
+        let tf = codec::frame_transform(
+            frame.timestamp_ns,
+            FRAME_WORLD,
+            FRAME_CAMERA_ESTIMATED,
+            frame.world_from_camera,
+        );
+        self.write_proto(self.channels.tf, t, &tf)?;
+
+        self.update_path(frame.timestamp_ns, t, pose.pose.unwrap_or_default())?;
+
+        if let (Some(id), Some(acc)) = (self.channels.accumulation, frame.accumulation) {
+            let data: Vec<u8> = acc.as_slice().iter().flat_map(|v| v.to_le_bytes()).collect();
+            let msg = RawImage {
+                timestamp: Some(stamp),
+                frame_id: frame.frame_id.to_owned(),
+                width: acc.width() as u32,
+                height: acc.height() as u32,
+                encoding: "32FC1".into(),
+                step: (acc.width() * 4) as u32,
+                data: Bytes::from(data),
+            };
+            self.write_proto(id, t, &msg)?;
+        }
+
+        let json = serde_json::to_vec(frame.stats).map_err(|e| Error::Decode {
+            topic: TOPIC_STATS.into(),
+            message: format!("cannot encode stats: {e}"),
+        })?;
+        self.write_new(self.channels.stats, t, Some(&json))?;
+        Ok(())
+    }
+
+    fn update_path(
+        &mut self,
+        timestamp_ns: u64,
+        log_time_ns: u64,
+        pose: foxglove::messages::Pose,
+    ) -> Result<()> {
+        if self.path_frames_seen.is_multiple_of(self.path_stride) {
+            self.path.push(pose);
+            if self.path.len() > MAX_PATH_POSES {
+                // Keep every other pose; the first (index 0) stays so the path starts right.
+                let mut i = 0;
+                self.path.retain(|_| {
+                    i += 1;
+                    (i - 1) % 2 == 0
+                });
+                self.path_stride *= 2;
+            }
+        }
+        self.path_frames_seen += 1;
+        let due = self
+            .last_path_publish_ns
+            .is_none_or(|last| timestamp_ns >= last.saturating_add(PATH_PUBLISH_INTERVAL_NS));
+        if due {
+            let mut poses = self.path.clone();
+            // Always end at the current pose, even when the stride skipped it.
+            if poses.last() != Some(&pose) {
+                poses.push(pose);
+            }
+            let msg = PosesInFrame {
+                timestamp: Some(codec::timestamp(timestamp_ns)),
+                frame_id: FRAME_WORLD.into(),
+                poses,
+            };
+            self.write_proto(self.channels.path, log_time_ns, &msg)?;
+            self.last_path_publish_ns = Some(timestamp_ns);
+        }
+        Ok(())
+    }
+
+    /// Writes a metadata record.
+    ///
+    /// # Errors
+    /// [`Error::Mcap`] on write failure.
+    pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
+        self.writer.write_metadata(&mcap::records::Metadata {
+            name: name.into(),
+            metadata,
+        })?;
+        Ok(())
+    }
+
+    /// Input messages copied so far.
+    pub fn copied_messages(&self) -> u64 {
+        self.copied_messages
+    }
+
+    /// New messages written so far.
+    pub fn new_messages(&self) -> u64 {
+        self.new_messages
+    }
+
+    /// Writes the summary and footer and returns the sink.
+    ///
+    /// # Errors
+    /// [`Error::Mcap`] when the summary or footer cannot be written.
+    pub fn finish(mut self) -> Result<W> {
+        self.writer.finish()?;
+        Ok(self.writer.into_inner())
+    }
+}
+
+/// Number of pixels set in `mask`.
+pub fn moving_pixels(mask: &Mask) -> u64 {
+    mask.as_slice().iter().filter(|&&v| v == MASK_SET).count() as u64
+}

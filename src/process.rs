@@ -1,0 +1,688 @@
+//! `occmask process` for one file: read an RGB-D MCAP, pair colour with depth, run a
+//! [`FrameProcessor`] per pair, and write the annotated copy or sidecar.
+//!
+//! Memory is bounded whatever the file length: messages stream through (indexed, log-time
+//! order when the file has a summary), at most [`MAX_QUEUED_IMAGES`] colour and depth images
+//! wait for a partner, and input messages wait only until no new message can be written
+//! before them (new messages take the colour message's log time, so the output stays in
+//! log-time order). Only the estimated trajectory (64 bytes per frame) and external poses
+//! (`--pose-topic`) are kept whole.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::io::{Seek, Write};
+use std::time::Instant;
+
+use nalgebra::Isometry3;
+
+use crate::error::{Error, Result};
+use crate::geometry::camera::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
+use crate::mcap_io::annotate::{
+    moving_pixels, AnnotateOptions, AnnotatedWriter, FrameAnnotation, FrameStatsMsg, JsonTime,
+    METADATA_PROCESS,
+};
+use crate::mcap_io::input::decode::{
+    decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into, ImageMsg,
+};
+use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
+use crate::mcap_io::input::{McapInput, RawMessage};
+use crate::mcap_io::DEPTH_UNITS_KEY;
+use crate::time::split_ns;
+use crate::trajectory::{interpolate, StampedPose};
+
+/// Where camera poses come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PoseMode {
+    /// The paper's closed loop: DVO with the previous mask excluding moving pixels.
+    Dvo,
+    /// The same DVO without the mask feedback (the paper's "Robust DVO" baseline).
+    DvoUnmasked,
+    /// Poses from a topic of the input, interpolated to each frame.
+    External,
+}
+
+impl PoseMode {
+    /// The name used on the command line and in `/occmask/stats`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PoseMode::Dvo => "dvo",
+            PoseMode::DvoUnmasked => "dvo-unmasked",
+            PoseMode::External => "external",
+        }
+    }
+}
+
+/// One RGB-D pair handed to a [`FrameProcessor`].
+#[derive(Debug, Clone, Copy)]
+pub struct RgbdFrame<'a> {
+    /// The colour image's stamp.
+    pub timestamp_ns: u64,
+    /// Intensity, 0..1.
+    pub gray: &'a GrayF32,
+    /// Depth in metres, 0 = invalid.
+    pub depth_m: &'a DepthMeters,
+    /// The external pose at this frame ([`PoseMode::External`] only).
+    pub world_from_camera: Option<Isometry3<f64>>,
+}
+
+/// What a [`FrameProcessor`] returns per frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessedFrame {
+    /// Moving-object mask, 255 = moving.
+    pub mask: Mask,
+    /// Camera pose (first frame = identity for DVO modes).
+    pub world_from_camera: Isometry3<f64>,
+    /// The accumulation map, if the processor exposes it.
+    pub accumulation: Option<Image<f32>>,
+    /// Odometry outcome (`converged`, `max_iterations`, `failed`, `first_frame`, `external`).
+    pub dvo_status: String,
+    /// Gauss–Newton iterations.
+    pub dvo_iterations: u32,
+    /// Final cost.
+    pub dvo_cost: f64,
+}
+
+/// The per-sequence algorithm (DVO + detector) behind a small boundary, so reading and
+/// writing can be tested with any implementation.
+pub trait FrameProcessor {
+    /// Processes the next frame (frames come in time order).
+    ///
+    /// # Errors
+    /// Whatever the algorithm reports (e.g. size mismatches).
+    fn process(&mut self, frame: &RgbdFrame<'_>) -> Result<ProcessedFrame>;
+}
+
+/// Builds the processor once intrinsics and image size are known.
+pub type ProcessorFactory<'a> =
+    dyn FnMut(PinholeIntrinsics, ImageSize, PoseMode) -> Result<Box<dyn FrameProcessor>> + 'a;
+
+/// Colour–depth pairing tolerance by default: TUM's `associate.py` uses 20 ms; Kinect
+/// colour and depth are at most half a 30 Hz frame (16.7 ms) apart.
+pub const DEFAULT_PAIR_TOLERANCE_NS: u64 = 20_000_000;
+/// External poses further apart than this around a frame are not interpolated (the frame is
+/// reported as outside the pose stream): 10 frames at 30 Hz.
+pub const DEFAULT_MAX_POSE_GAP_NS: u64 = 333_000_000;
+/// Images waiting for a partner, per stream; beyond this the oldest is counted unpaired.
+/// 64 frames is 2 s at 30 Hz, far more than any real colour/depth skew.
+pub const MAX_QUEUED_IMAGES: usize = 64;
+/// Depth units per metre when neither the flag nor channel metadata says: millimetres (ROS
+/// REP 118 for `16UC1`).
+pub const DEFAULT_DEPTH_UNITS_PER_METER: f64 = 1000.0;
+
+/// Options of [`process_file`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessConfig {
+    /// Topics from the command line.
+    pub topics: TopicOverrides,
+    /// `--camera`: overrides the calibration topic.
+    pub intrinsics: Option<PinholeIntrinsics>,
+    /// `--depth-units-per-meter`: overrides channel metadata and the millimetre default.
+    pub depth_units_per_meter: Option<f64>,
+    /// Pose source.
+    pub pose_mode: PoseMode,
+    /// With [`PoseMode::External`] and transform topics: the child frame to follow
+    /// (default: the first child frame on the topic).
+    pub pose_child_frame: Option<String>,
+    /// Max colour–depth stamp difference.
+    pub pair_tolerance_ns: u64,
+    /// Max gap between external poses around a frame.
+    pub max_pose_gap_ns: u64,
+    /// Only frames with colour stamps at or after this many ns after the first colour image.
+    pub start_offset_ns: Option<u64>,
+    /// Only frames before this many ns after the first colour image.
+    pub end_offset_ns: Option<u64>,
+    /// Measure decode/process times into `/occmask/stats` (makes output bytes
+    /// non-deterministic).
+    pub timings: bool,
+    /// Output options.
+    pub annotate: AnnotateOptions,
+}
+
+impl Default for ProcessConfig {
+    fn default() -> Self {
+        Self {
+            topics: TopicOverrides::default(),
+            intrinsics: None,
+            depth_units_per_meter: None,
+            pose_mode: PoseMode::Dvo,
+            pose_child_frame: None,
+            pair_tolerance_ns: DEFAULT_PAIR_TOLERANCE_NS,
+            max_pose_gap_ns: DEFAULT_MAX_POSE_GAP_NS,
+            start_offset_ns: None,
+            end_offset_ns: None,
+            timings: false,
+            annotate: AnnotateOptions::default(),
+        }
+    }
+}
+
+/// Counts and results of one file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessReport {
+    /// The channels used.
+    pub topics: RgbdTopics,
+    /// Intrinsics used.
+    pub intrinsics: PinholeIntrinsics,
+    /// Depth units per metre used for 16-bit depth.
+    pub depth_units_per_meter: f64,
+    /// Colour messages read.
+    pub color_messages: u64,
+    /// Depth messages read.
+    pub depth_messages: u64,
+    /// Frames processed and written.
+    pub frames: u64,
+    /// Colour images without a depth partner within the tolerance.
+    pub unpaired_color: u64,
+    /// Depth images without a colour partner.
+    pub unpaired_depth: u64,
+    /// Pairs outside `--start`/`--end`.
+    pub outside_time_range: u64,
+    /// Pairs outside the external pose stream (not processed).
+    pub outside_pose_stream: u64,
+    /// Input messages copied.
+    pub copied_messages: u64,
+    /// New messages written.
+    pub new_messages: u64,
+    /// The estimated trajectory (colour stamps).
+    pub trajectory: Vec<StampedPose>,
+}
+
+/// Callbacks during [`process_file`].
+pub trait ProcessHooks {
+    /// Called after each input message is read, with the count so far.
+    fn messages_read(&mut self, _count: u64) {}
+    /// Called after each processed frame with its stamp and mask (e.g. `--export-masks`).
+    ///
+    /// # Errors
+    /// Stops processing with this error.
+    fn frame_done(&mut self, _timestamp_ns: u64, _mask: &Mask) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Hooks that do nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoHooks;
+impl ProcessHooks for NoHooks {}
+
+struct Queued {
+    log_time_ns: u64,
+    msg: ImageMsg,
+}
+
+enum Pairing {
+    Pair(Queued, Queued),
+    UnpairedColor,
+    UnpairedDepth,
+}
+
+/// Greedy nearest-stamp pairing over two streams in time order.
+struct Pairer {
+    color: VecDeque<Queued>,
+    depth: VecDeque<Queued>,
+    tolerance_ns: u64,
+}
+
+impl Pairer {
+    fn next(&mut self, end_of_stream: bool) -> Option<Pairing> {
+        let tol = self.tolerance_ns;
+        let (Some(c), Some(d)) = (self.color.front(), self.depth.front()) else {
+            if end_of_stream || self.color.len() > MAX_QUEUED_IMAGES {
+                if self.color.pop_front().is_some() {
+                    return Some(Pairing::UnpairedColor);
+                }
+            }
+            if end_of_stream || self.depth.len() > MAX_QUEUED_IMAGES {
+                if self.depth.pop_front().is_some() {
+                    return Some(Pairing::UnpairedDepth);
+                }
+            }
+            return None;
+        };
+        let (tc, td) = (c.msg.timestamp_ns, d.msg.timestamp_ns);
+        if td.saturating_add(tol) < tc {
+            self.depth.pop_front();
+            return Some(Pairing::UnpairedDepth);
+        }
+        if tc.saturating_add(tol) < td {
+            self.color.pop_front();
+            return Some(Pairing::UnpairedColor);
+        }
+        let ready = match self.depth.get(1) {
+            Some(d2) => {
+                if tc.abs_diff(d2.msg.timestamp_ns) < tc.abs_diff(td) {
+                    self.depth.pop_front();
+                    return Some(Pairing::UnpairedDepth);
+                }
+                true
+            }
+            // A later depth could only be closer if this one is earlier than the colour.
+            None => end_of_stream || td >= tc || self.color.len() > MAX_QUEUED_IMAGES,
+        };
+        if !ready {
+            return None;
+        }
+        let c = self.color.pop_front()?;
+        let d = self.depth.pop_front()?;
+        Some(Pairing::Pair(c, d))
+    }
+
+    fn oldest_color_log_time(&self) -> Option<u64> {
+        self.color.iter().map(|q| q.log_time_ns).min()
+    }
+}
+
+fn missing_calibration(input: &McapInput, topics: &RgbdTopics, why: &str) -> Error {
+    Error::Dataset {
+        path: input.path().to_owned(),
+        message: format!(
+            "no camera calibration for {}: {why}; pass --camera FX,FY,CX,CY (or a preset such as fr2) \
+             or --camera-info-topic TOPIC",
+            topics.color.topic
+        ),
+    }
+}
+
+fn load_external_poses(
+    input: &McapInput,
+    topics: &RgbdTopics,
+    config: &ProcessConfig,
+) -> Result<Vec<StampedPose>> {
+    let Some(channel) = &topics.pose else {
+        return Err(Error::InvalidParameter {
+            name: "--pose",
+            value: "external".into(),
+            expected: "a --pose-topic to read the poses from".into(),
+        });
+    };
+    let ct = channel.channel_type.ok_or_else(|| Error::Decode {
+        topic: channel.topic.clone(),
+        message: "unsupported pose schema".into(),
+    })?;
+    let mut child = config.pose_child_frame.clone();
+    let mut poses = Vec::new();
+    input.for_each_message(Some(std::slice::from_ref(&channel.topic)), None, |m| {
+        for sample in decode_poses(ct, &channel.topic, &m.data)? {
+            if let Some(c) = &sample.child_frame {
+                if c == crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED {
+                    continue;
+                }
+                match &child {
+                    None => child = Some(c.clone()),
+                    Some(wanted) if wanted != c => continue,
+                    Some(_) => {}
+                }
+            }
+            poses.push(StampedPose {
+                timestamp_ns: sample.timestamp_ns,
+                world_from_camera: sample.parent_from_child,
+            });
+        }
+        Ok(true)
+    })?;
+    poses.sort_by_key(|p| p.timestamp_ns);
+    poses.dedup_by_key(|p| p.timestamp_ns);
+    if poses.is_empty() {
+        return Err(Error::Dataset {
+            path: input.path().to_owned(),
+            message: format!(
+                "--pose-topic {}: no poses{}",
+                channel.topic,
+                child
+                    .map(|c| format!(" with child frame {c}"))
+                    .unwrap_or_default()
+            ),
+        });
+    }
+    Ok(poses)
+}
+
+/// Processes one input file into `sink`; see the module documentation.
+///
+/// # Errors
+/// [`Error::Dataset`] for missing channels or calibration (naming the flag that fixes it);
+/// [`Error::Decode`] for undecodable or unsupported messages; [`Error::SizeMismatch`] when
+/// colour and depth (or the calibration) differ in size; I/O and MCAP errors.
+pub fn process_file<W: Write + Seek>(
+    input: &McapInput,
+    sink: W,
+    config: &ProcessConfig,
+    make_processor: &mut ProcessorFactory<'_>,
+    hooks: &mut dyn ProcessHooks,
+) -> Result<(W, ProcessReport)> {
+    let mut topics_override = config.topics.clone();
+    if config.pose_mode != PoseMode::External {
+        topics_override.pose = None;
+    }
+    let topics = detect_topics(input, &topics_override)?;
+
+    // Calibration: the flag, else the first message of the calibration channel.
+    let (intrinsics, calibration_size) = match (config.intrinsics, &topics.calibration) {
+        (Some(k), _) => (k, None),
+        (None, Some(channel)) => {
+            let first = input.first_message(channel.id)?.ok_or_else(|| {
+                missing_calibration(input, &topics, &format!("{} has no messages", channel.topic))
+            })?;
+            let ct = channel
+                .channel_type
+                .ok_or_else(|| missing_calibration(input, &topics, "unsupported schema"))?;
+            let calibration = decode_calibration(ct, &channel.topic, &first.data)?;
+            (calibration.intrinsics(&channel.topic)?, Some(calibration.size))
+        }
+        (None, None) => {
+            return Err(missing_calibration(
+                input,
+                &topics,
+                "the file has no CameraCalibration/CameraInfo channel",
+            ))
+        }
+    };
+    let depth_units_per_meter = match config.depth_units_per_meter {
+        Some(u) => u,
+        None => match topics.depth.metadata.get(DEPTH_UNITS_KEY) {
+            Some(text) => text
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|u| u.is_finite() && *u > 0.0)
+                .ok_or_else(|| Error::Decode {
+                    topic: topics.depth.topic.clone(),
+                    message: format!(
+                        "channel metadata {DEPTH_UNITS_KEY} = {text:?} is not a positive number; \
+                         pass --depth-units-per-meter"
+                    ),
+                })?,
+            None => DEFAULT_DEPTH_UNITS_PER_METER,
+        },
+    };
+    let external_poses = if config.pose_mode == PoseMode::External {
+        load_external_poses(input, &topics, config)?
+    } else {
+        Vec::new()
+    };
+
+    let mut writer = AnnotatedWriter::new(sink, input, &config.annotate)?;
+    let metadata = BTreeMap::from([
+        ("tool".to_owned(), crate::mcap_io::LIBRARY.to_owned()),
+        ("pose_source".to_owned(), config.pose_mode.as_str().to_owned()),
+        ("color_topic".to_owned(), topics.color.topic.clone()),
+        ("depth_topic".to_owned(), topics.depth.topic.clone()),
+        (
+            "intrinsics".to_owned(),
+            format!(
+                "{},{},{},{}",
+                intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy
+            ),
+        ),
+        (DEPTH_UNITS_KEY.to_owned(), depth_units_per_meter.to_string()),
+    ]);
+    writer.write_metadata(METADATA_PROCESS, metadata)?;
+
+    let color_ct = topics.color.channel_type.ok_or_else(|| Error::Decode {
+        topic: topics.color.topic.clone(),
+        message: "unsupported schema".into(),
+    })?;
+    let depth_ct = topics.depth.channel_type.ok_or_else(|| Error::Decode {
+        topic: topics.depth.topic.clone(),
+        message: "unsupported schema".into(),
+    })?;
+    let copy = config.annotate.copy_input;
+    let read_topics: Option<Vec<String>> = if copy {
+        None
+    } else {
+        Some(vec![topics.color.topic.clone(), topics.depth.topic.clone()])
+    };
+
+    let mut state = FrameLoop {
+        pairer: Pairer {
+            color: VecDeque::new(),
+            depth: VecDeque::new(),
+            tolerance_ns: config.pair_tolerance_ns,
+        },
+        pending: VecDeque::new(),
+        gray: GrayF32::filled(ImageSize::new(0, 0), 0.0),
+        depth_m: DepthMeters::filled(ImageSize::new(0, 0), 0.0),
+        processor: None,
+        frame_size: None,
+        first_color_ns: None,
+        report: ProcessReport {
+            topics: topics.clone(),
+            intrinsics,
+            depth_units_per_meter,
+            color_messages: 0,
+            depth_messages: 0,
+            frames: 0,
+            unpaired_color: 0,
+            unpaired_depth: 0,
+            outside_time_range: 0,
+            outside_pose_stream: 0,
+            copied_messages: 0,
+            new_messages: 0,
+            trajectory: Vec::new(),
+        },
+    };
+    let ctx = FrameContext {
+        config,
+        topics: &topics,
+        intrinsics,
+        calibration_size,
+        depth_units_per_meter,
+        external_poses: &external_poses,
+    };
+    let mut read = 0u64;
+    input.for_each_message(read_topics.as_deref(), None, |m| {
+        read += 1;
+        hooks.messages_read(read);
+        let id = m.header.channel_id;
+        if id == topics.color.id || id == topics.depth.id {
+            let is_color = id == topics.color.id;
+            let (ct, topic) = if is_color {
+                (color_ct, &topics.color.topic)
+            } else {
+                (depth_ct, &topics.depth.topic)
+            };
+            let queued = Queued {
+                log_time_ns: m.header.log_time,
+                msg: decode_image(ct, topic, &m.data)?,
+            };
+            if is_color {
+                state.report.color_messages += 1;
+                state.first_color_ns.get_or_insert(queued.msg.timestamp_ns);
+                state.pairer.color.push_back(queued);
+            } else {
+                state.report.depth_messages += 1;
+                state.pairer.depth.push_back(queued);
+            }
+        }
+        if copy {
+            state.pending.push_back(m);
+        }
+        state.drain(&ctx, &mut writer, make_processor, hooks, false)?;
+        Ok(true)
+    })?;
+    state.drain(&ctx, &mut writer, make_processor, hooks, true)?;
+    state.report.copied_messages = writer.copied_messages();
+    state.report.new_messages = writer.new_messages();
+    let sink = writer.finish()?;
+    Ok((sink, state.report))
+}
+
+struct FrameContext<'a> {
+    config: &'a ProcessConfig,
+    topics: &'a RgbdTopics,
+    intrinsics: PinholeIntrinsics,
+    calibration_size: Option<ImageSize>,
+    depth_units_per_meter: f64,
+    external_poses: &'a [StampedPose],
+}
+
+struct FrameLoop {
+    pairer: Pairer,
+    pending: VecDeque<RawMessage>,
+    gray: GrayF32,
+    depth_m: DepthMeters,
+    processor: Option<Box<dyn FrameProcessor>>,
+    frame_size: Option<ImageSize>,
+    first_color_ns: Option<u64>,
+    report: ProcessReport,
+}
+
+impl FrameLoop {
+    /// Pairs what can be paired, processes the pairs, and copies input messages that can no
+    /// longer have new messages written before them.
+    fn drain<W: Write + Seek>(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        writer: &mut AnnotatedWriter<W>,
+        make_processor: &mut ProcessorFactory<'_>,
+        hooks: &mut dyn ProcessHooks,
+        end_of_stream: bool,
+    ) -> Result<()> {
+        while let Some(p) = self.pairer.next(end_of_stream) {
+            match p {
+                Pairing::UnpairedColor => self.report.unpaired_color += 1,
+                Pairing::UnpairedDepth => self.report.unpaired_depth += 1,
+                Pairing::Pair(c, d) => self.frame(ctx, writer, make_processor, hooks, c, d)?,
+            }
+        }
+        let limit = if end_of_stream {
+            u64::MAX
+        } else {
+            self.pairer.oldest_color_log_time().unwrap_or(u64::MAX)
+        };
+        while self.pending.front().is_some_and(|m| m.header.log_time <= limit) {
+            if let Some(m) = self.pending.pop_front() {
+                writer.copy_message(&m.header, &m.data)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn frame<W: Write + Seek>(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        writer: &mut AnnotatedWriter<W>,
+        make_processor: &mut ProcessorFactory<'_>,
+        hooks: &mut dyn ProcessHooks,
+        color: Queued,
+        depth: Queued,
+    ) -> Result<()> {
+        let stamp = color.msg.timestamp_ns;
+        let offset = stamp.saturating_sub(self.first_color_ns.unwrap_or(stamp));
+        let before_start = ctx.config.start_offset_ns.is_some_and(|s| offset < s);
+        let after_end = ctx.config.end_offset_ns.is_some_and(|e| offset >= e);
+        if before_start || after_end {
+            self.report.outside_time_range += 1;
+            return Ok(());
+        }
+        let external = if ctx.config.pose_mode == PoseMode::External {
+            match interpolate(ctx.external_poses, stamp, ctx.config.max_pose_gap_ns) {
+                Some(p) => Some(p),
+                None => {
+                    self.report.outside_pose_stream += 1;
+                    return Ok(());
+                }
+            }
+        } else {
+            None
+        };
+        let decode_start = ctx.config.timings.then(Instant::now);
+        gray_from_image_into(&color.msg, &ctx.topics.color.topic, &mut self.gray)?;
+        depth_from_image_into(
+            &depth.msg,
+            &ctx.topics.depth.topic,
+            ctx.depth_units_per_meter,
+            &mut self.depth_m,
+        )?;
+        let size = self.gray.size();
+        if self.depth_m.size() != size {
+            return Err(Error::SizeMismatch {
+                what: format!(
+                    "depth {} vs colour {} (depth must be registered to the colour camera)",
+                    ctx.topics.depth.topic, ctx.topics.color.topic
+                ),
+                expected: size,
+                found: self.depth_m.size(),
+            });
+        }
+        if let Some(cal) = ctx.calibration_size.filter(|c| c.area() > 0 && *c != size) {
+            return Err(Error::SizeMismatch {
+                what: format!(
+                    "calibration vs colour {} (pass --camera FX,FY,CX,CY for the image size)",
+                    ctx.topics.color.topic
+                ),
+                expected: size,
+                found: cal,
+            });
+        }
+        let decode_ms = decode_start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3);
+        match self.frame_size {
+            Some(first) if first != size => {
+                return Err(Error::SizeMismatch {
+                    what: format!("image size changed within {}", ctx.topics.color.topic),
+                    expected: first,
+                    found: size,
+                })
+            }
+            _ => self.frame_size = Some(size),
+        }
+        let processor = match &mut self.processor {
+            Some(p) => p,
+            None => self
+                .processor
+                .insert(make_processor(ctx.intrinsics, size, ctx.config.pose_mode)?),
+        };
+        let process_start = ctx.config.timings.then(Instant::now);
+        let result = processor.process(&RgbdFrame {
+            timestamp_ns: stamp,
+            gray: &self.gray,
+            depth_m: &self.depth_m,
+            world_from_camera: external,
+        })?;
+        let process_ms = process_start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3);
+
+        // Copy everything that precedes this frame's new messages.
+        while self
+            .pending
+            .front()
+            .is_some_and(|m| m.header.log_time <= color.log_time_ns)
+        {
+            if let Some(m) = self.pending.pop_front() {
+                writer.copy_message(&m.header, &m.data)?;
+            }
+        }
+        let moving = moving_pixels(&result.mask);
+        let (sec, nsec) = split_ns(stamp);
+        let stats = FrameStatsMsg {
+            timestamp: JsonTime {
+                sec: sec.into(),
+                nsec,
+            },
+            frame_index: self.report.frames,
+            pose_source: ctx.config.pose_mode.as_str().into(),
+            dvo_status: result.dvo_status.clone(),
+            dvo_iterations: result.dvo_iterations,
+            dvo_cost: result.dvo_cost,
+            moving_fraction: moving as f64 / size.area().max(1) as f64,
+            moving_pixels: moving,
+            decode_ms,
+            process_ms,
+        };
+        writer.write_frame(&FrameAnnotation {
+            log_time_ns: color.log_time_ns,
+            timestamp_ns: stamp,
+            frame_id: &color.msg.frame_id,
+            mask: &result.mask,
+            world_from_camera: &result.world_from_camera,
+            accumulation: result.accumulation.as_ref(),
+            stats: &stats,
+        })?;
+        hooks.frame_done(stamp, &result.mask)?;
+        self.report.frames += 1;
+        self.report.trajectory.push(StampedPose {
+            timestamp_ns: stamp,
+            world_from_camera: result.world_from_camera,
+        });
+        Ok(())
+    }
+}
