@@ -260,7 +260,7 @@ fn progress_bar(quiet: bool) -> ProgressBar {
     }
     let bar = ProgressBar::with_draw_target(Some(0), ProgressDrawTarget::stderr());
     if let Ok(style) =
-        ProgressStyle::with_template("{spinner} converting [{bar:40}] {pos}/{len} messages groups ({eta})")
+        ProgressStyle::with_template("{spinner} converting [{bar:40}] {pos}/{len} images and poses ({eta})")
     {
         bar.set_style(style.progress_chars("=> "));
     }

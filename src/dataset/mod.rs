@@ -593,6 +593,60 @@ mod tests {
         assert_eq!(nearest_gap_ns(&refs(&[0, 12]), &refs(&[10])), Some(2_000_000));
     }
 
+    fn write_image(
+        dir: &Path,
+        name: &str,
+        image: image::DynamicImage,
+        format: image::ImageFormat,
+    ) -> PathBuf {
+        let path = dir.join(name);
+        image.save_with_format(&path, format).unwrap();
+        path
+    }
+
+    #[test]
+    fn jpeg_colour_checks_end_marker_and_tolerates_padding() {
+        let dir = tempfile::tempdir().unwrap();
+        let img =
+            image::DynamicImage::ImageRgb8(image::RgbImage::from_pixel(16, 8, image::Rgb([10, 200, 30])));
+        let path = write_image(dir.path(), "a.jpg", img, image::ImageFormat::Jpeg);
+        let c = read_color(&path).unwrap();
+        assert_eq!((c.format, c.size), (ColorFormat::Jpeg, ImageSize::new(16, 8)));
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes.extend_from_slice(&[0, 0, 0]);
+        std::fs::write(&path, &bytes).unwrap();
+        assert!(read_color(&path).is_ok(), "zero padding after EOI is accepted");
+        std::fs::write(&path, &bytes[..bytes.len() - 10]).unwrap();
+        let err = read_color(&path).unwrap_err().to_string();
+        assert!(err.contains("truncated JPEG") && err.contains("a.jpg"), "{err}");
+    }
+
+    #[test]
+    fn depth_must_be_16_bit_grey() {
+        let dir = tempfile::tempdir().unwrap();
+        let d16 = image::DynamicImage::ImageLuma16(image::ImageBuffer::from_fn(3, 2, |x, y| {
+            image::Luma([(x * 1000 + y * 7) as u16])
+        }));
+        let path = write_image(dir.path(), "d.png", d16, image::ImageFormat::Png);
+        let d = read_depth(&path).unwrap();
+        assert_eq!(d.size, ImageSize::new(3, 2));
+        assert_eq!(d.data, vec![0, 1000, 2000, 7, 1007, 2007]);
+        let rgb16 = image::DynamicImage::ImageRgb16(image::ImageBuffer::new(3, 2));
+        let path = write_image(dir.path(), "c.png", rgb16, image::ImageFormat::Png);
+        let err = read_depth(&path).unwrap_err().to_string();
+        assert!(err.contains("found Rgb16") && !err.contains("8-bit"), "{err}");
+    }
+
+    #[test]
+    fn mask_thresholds_white() {
+        let dir = tempfile::tempdir().unwrap();
+        let gray = image::DynamicImage::ImageLuma8(image::GrayImage::from_fn(4, 1, |x, _| {
+            image::Luma([[0u8, 100, 128, 255][x as usize]])
+        }));
+        let path = write_image(dir.path(), "m.png", gray, image::ImageFormat::Png);
+        assert_eq!(read_mask(&path).unwrap().as_slice(), &[0, 0, MASK_SET, MASK_SET]);
+    }
+
     #[test]
     fn camera_names() {
         assert_eq!(

@@ -15,6 +15,7 @@ use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{ImageSize, Mask, Rgb8};
 use crate::time::{join_ns, split_ns};
+use crate::trajectory::StampedPose;
 
 use super::{
     ENCODING_16UC1, ENCODING_MONO8, ENCODING_RGB8, SCHEMA_CAMERA_CALIBRATION, SCHEMA_COMPRESSED_IMAGE,
@@ -386,6 +387,51 @@ pub fn isometry_from_parts(
     ))
 }
 
+/// Decodes a `CompressedImage` (PNG or JPEG) into `rgb8` pixels (grey or RGBA inputs are
+/// converted).
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` for an unknown format or undecodable bytes.
+pub fn rgb8_from_compressed(image: &CompressedImage, topic: &str) -> Result<Rgb8> {
+    let format = ColorFormat::parse(&image.format)
+        .or_else(|| ColorFormat::from_magic(&image.data))
+        .ok_or_else(|| {
+            decode_error(
+                topic,
+                format!("expected format png or jpeg, found {:?}", image.format),
+            )
+        })?;
+    let image_format = match format {
+        ColorFormat::Png => ::image::ImageFormat::Png,
+        ColorFormat::Jpeg => ::image::ImageFormat::Jpeg,
+    };
+    let decoded = ::image::load_from_memory_with_format(&image.data, image_format)
+        .map_err(|e| decode_error(topic, format!("cannot decode {} image: {e}", format.as_str())))?
+        .into_rgb8();
+    let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
+    let pixels = decoded
+        .into_raw()
+        .chunks_exact(3)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect();
+    Rgb8::from_vec(size, pixels)
+}
+
+/// A [`StampedPose`] (`world_from_camera` at the message timestamp) from a `PoseInFrame`.
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` for a missing or invalid pose.
+pub fn stamped_pose_from(pose: &PoseInFrame, topic: &str) -> Result<StampedPose> {
+    let p = pose
+        .pose
+        .as_ref()
+        .ok_or_else(|| decode_error(topic, "expected a pose, found none"))?;
+    Ok(StampedPose {
+        timestamp_ns: timestamp_ns(pose.timestamp.as_ref()),
+        world_from_camera: isometry_from_parts(p.position.as_ref(), p.orientation.as_ref(), topic)?,
+    })
+}
+
 /// A decoded message of one of the schemas occmask writes.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Decoded {
@@ -508,6 +554,42 @@ mod tests {
         let tf = frame_transform(1, "world", "cam", &iso);
         let back = isometry_from_parts(tf.translation.as_ref(), tf.rotation.as_ref(), "/tf").unwrap();
         assert_relative_eq!(back.to_homogeneous(), iso.to_homogeneous(), epsilon = 1e-12);
+    }
+
+    #[test]
+    fn compressed_png_decodes_to_the_same_pixels() {
+        let size = ImageSize::new(4, 3);
+        let rgb = Rgb8::from_fn(size, |x, y| [x as u8 * 60, y as u8 * 80, 7]);
+        let flat: Vec<u8> = rgb.as_slice().iter().flatten().copied().collect();
+        let mut png = Vec::new();
+        ::image::RgbImage::from_raw(4, 3, flat)
+            .unwrap()
+            .write_to(&mut std::io::Cursor::new(&mut png), ::image::ImageFormat::Png)
+            .unwrap();
+        let msg = compressed_image(3, "cam", Bytes::from(png), ColorFormat::Png);
+        assert_eq!(rgb8_from_compressed(&msg, "/c").unwrap(), rgb);
+        let bad = compressed_image(
+            3,
+            "cam",
+            Bytes::from_static(b"\x89PNG\r\n\x1a\nxx"),
+            ColorFormat::Png,
+        );
+        assert!(rgb8_from_compressed(&bad, "/c")
+            .unwrap_err()
+            .to_string()
+            .contains("/c"));
+    }
+
+    #[test]
+    fn stamped_pose_round_trips() {
+        let iso = Isometry3::new(NVector3::new(0.5, 0.0, -1.0), NVector3::new(0.0, 0.3, 0.0));
+        let back = stamped_pose_from(&pose_in_frame(42, "world", &iso), "/p").unwrap();
+        assert_eq!(back.timestamp_ns, 42);
+        assert_relative_eq!(
+            back.world_from_camera.to_homogeneous(),
+            iso.to_homogeneous(),
+            epsilon = 1e-12
+        );
     }
 
     #[test]
