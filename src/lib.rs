@@ -12,6 +12,7 @@
 pub mod error;
 pub mod geometry;
 pub mod image_buf;
+pub mod synthetic;
 pub mod time;
 pub mod trajectory;
 
