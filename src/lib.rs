@@ -12,6 +12,8 @@
 pub mod error;
 pub mod geometry;
 pub mod image_buf;
+pub mod metrics;
+pub mod occlusion;
 pub mod synthetic;
 pub mod time;
 pub mod trajectory;

@@ -57,8 +57,9 @@ pub struct DepthSensorModel {
     pub disparity_step_px: f32,
     /// Stereo baseline in metres used for disparity quantisation (Kinect v1: 0.075 m).
     pub baseline_m: f32,
-    /// A pixel is invalid when a 4-neighbour's true depth differs by more than this (metres),
-    /// imitating the missing depth along occlusion edges of structured-light sensors.
+    /// A pixel is invalid when a 4-neighbour's true depth is nearer by more than this (metres),
+    /// imitating the missing depth on the background side of occlusion edges of
+    /// structured-light sensors (the projector's shadow).
     pub edge_jump_m: f32,
     /// Width in pixels of the image border ring with no depth.
     pub border_px: usize,
@@ -944,7 +945,9 @@ fn apply_sensor_model(
                     let z = true_row[x];
                     let border = sensor.border_px;
                     let on_border = x < border || y < border || x + border >= width || y + border >= height;
-                    let jump = |other: f32| (other - z).abs() > sensor.edge_jump_m;
+                    // Only the far side of a depth edge loses its measurement (the projector's
+                    // shadow on the background); the near surface's edge pixels stay measured.
+                    let jump = |other: f32| z - other > sensor.edge_jump_m;
                     let edge = (x > 0 && jump(true_row[x - 1]))
                         || (x + 1 < width && jump(true_row[x + 1]))
                         || above.is_some_and(|r| jump(r[x]))
@@ -1145,12 +1148,17 @@ mod tests {
         }
         let mut edges = 0;
         let mut edges_invalid = 0;
+        let mut near_valid = 0;
         for y in border + 1..h - border - 1 {
             for x in border + 1..w - border - 1 {
                 let z = frame.depth_true_m.get(x, y);
-                if (frame.depth_true_m.get(x + 1, y) - z).abs() > 0.3 {
+                let right = frame.depth_true_m.get(x + 1, y);
+                if (right - z).abs() > 0.3 {
+                    // The far side of the edge is invalid, the near side measured.
+                    let (far, near) = if right > z { (x + 1, x) } else { (x, x + 1) };
                     edges += 1;
-                    edges_invalid += usize::from(frame.depth_raw.get(x, y) == 0);
+                    edges_invalid += usize::from(frame.depth_raw.get(far, y) == 0);
+                    near_valid += usize::from(frame.depth_raw.get(near, y) != 0);
                 }
                 let raw = frame.depth_raw.get(x, y);
                 assert_eq!(frame.depth_m.get(x, y), raw as f32 / DEPTH_UNITS_PER_M);
@@ -1161,6 +1169,8 @@ mod tests {
             "the dominant object must produce depth edges ({edges})"
         );
         assert_eq!(edges, edges_invalid);
+        // Near-side pixels are valid unless they are themselves the far side of another edge or dropped.
+        assert!(near_valid as f64 > 0.9 * edges as f64, "{near_valid} of {edges}");
         let valid = frame.depth_raw.as_slice().iter().filter(|&&r| r > 0).count();
         assert!(
             valid as f64 > 0.85 * (w * h) as f64,
