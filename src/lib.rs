@@ -16,7 +16,10 @@ pub mod error;
 pub mod geometry;
 pub mod image_buf;
 pub mod mcap_io;
+pub mod metrics;
+pub mod occlusion;
 pub mod process;
+pub mod synthetic;
 pub mod time;
 pub mod trajectory;
 

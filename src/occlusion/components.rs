@@ -1,0 +1,278 @@
+//! Connected components, small-object suppression, occlusion prediction into the newly
+//! discovered area (algorithm.md §5.1, §9-Q5) and pruning of unattached predictions (§5.3).
+//! Sequential (flood fills), on preallocated buffers.
+
+use super::{Adjacency, OcclusionConfig};
+use crate::image_buf::{DepthMeters, Image, ImageSize, Mask};
+
+/// Label value of an object pixel not yet assigned to a component.
+const UNLABELLED: u32 = u32::MAX;
+
+const NEIGHBOURS_4: [(isize, isize); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
+const NEIGHBOURS_8: [(isize, isize); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
+/// Counts of one labelling/prediction pass.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct LabelStats {
+    pub components: usize,
+    pub small_components_erased: usize,
+    pub predicted_pixels: usize,
+}
+
+#[derive(Debug, Clone)]
+pub(super) struct Components {
+    width: usize,
+    height: usize,
+    /// 0 = not in the set, UNLABELLED = in the set, else component id.
+    labels: Vec<u32>,
+    stack: Vec<u32>,
+    component: Vec<u32>,
+    /// Prediction target (a copy of Ñ from which filled pixels are removed; shared by components).
+    target: Vec<u8>,
+    /// `source_stamp[u] == source_epoch` ⇔ u is in the current component's source set.
+    source_stamp: Vec<u32>,
+    source_epoch: u32,
+    /// `candidate_stamp[u] == candidate_epoch` ⇔ u is already a candidate of the current ring.
+    candidate_stamp: Vec<u32>,
+    candidate_epoch: u32,
+    frontier: Vec<u32>,
+    candidates: Vec<u32>,
+    updates: Vec<(u32, f32)>,
+}
+
+/// Neighbour (x + dx, y + dy) if inside the image.
+#[inline]
+fn neighbour(x: usize, y: usize, dx: isize, dy: isize, width: usize, height: usize) -> Option<usize> {
+    let nx = x.checked_add_signed(dx)?;
+    let ny = y.checked_add_signed(dy)?;
+    (nx < width && ny < height).then_some(ny * width + nx)
+}
+
+/// Advances an epoch counter; on wrap-around clears the stamps so stale values never match.
+fn next_epoch(epoch: &mut u32, stamps: &mut [u32]) -> u32 {
+    if *epoch == u32::MAX {
+        stamps.fill(0);
+        *epoch = 0;
+    }
+    *epoch += 1;
+    *epoch
+}
+
+impl Components {
+    pub(super) fn new(size: ImageSize) -> Self {
+        let n = size.area();
+        Self {
+            width: size.width,
+            height: size.height,
+            labels: vec![0; n],
+            stack: Vec::with_capacity(n),
+            component: Vec::with_capacity(n),
+            target: vec![0; n],
+            source_stamp: vec![0; n],
+            source_epoch: 0,
+            candidate_stamp: vec![0; n],
+            candidate_epoch: 0,
+            frontier: Vec::with_capacity(n),
+            candidates: Vec::with_capacity(n),
+            updates: Vec::with_capacity(n),
+        }
+    }
+
+    /// Flood-fills the 8-connected component of `seed` (labels must hold UNLABELLED on set
+    /// pixels) with `id`, leaving its pixels in `self.component`.
+    fn flood(&mut self, seed: usize, id: u32) {
+        let (width, height) = (self.width, self.height);
+        self.component.clear();
+        self.stack.clear();
+        self.labels[seed] = id;
+        self.stack.push(seed as u32);
+        while let Some(p) = self.stack.pop() {
+            let p = p as usize;
+            self.component.push(p as u32);
+            let (x, y) = (p % width, p / width);
+            for &(dx, dy) in &NEIGHBOURS_8 {
+                if let Some(n) = neighbour(x, y, dx, dy, width, height) {
+                    if self.labels[n] == UNLABELLED {
+                        self.labels[n] = id;
+                        self.stack.push(n as u32);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Step 10: labels {A > τ_α}, erases components below `min_object_pixels` from A and, when
+    /// enabled, grows the others into Ñ.
+    pub(super) fn suppress_and_predict(
+        &mut self,
+        config: &OcclusionConfig,
+        min_object_pixels: usize,
+        compensated_m: &DepthMeters,
+        newly_discovered: &Image<u8>,
+        accumulation_m: &mut DepthMeters,
+    ) -> LabelStats {
+        let mut stats = LabelStats::default();
+        // Object set O₀ is fixed before any prediction writes into A.
+        for ((label, &a), &z) in self
+            .labels
+            .iter_mut()
+            .zip(accumulation_m.as_slice())
+            .zip(compensated_m.as_slice())
+        {
+            *label = if a > config.threshold(config.alpha, z) {
+                UNLABELLED
+            } else {
+                0
+            };
+        }
+        if config.predict_newly_discovered {
+            self.target.copy_from_slice(newly_discovered.as_slice());
+        }
+        let mut next_id = 0u32;
+        for seed in 0..self.labels.len() {
+            if self.labels[seed] != UNLABELLED {
+                continue;
+            }
+            next_id += 1;
+            self.flood(seed, next_id);
+            stats.components += 1;
+            if self.component.len() < min_object_pixels {
+                let a = accumulation_m.as_mut_slice();
+                for &p in &self.component {
+                    a[p as usize] = 0.0;
+                }
+                stats.small_components_erased += 1;
+            } else if config.predict_newly_discovered {
+                stats.predicted_pixels += self.predict(config, compensated_m, accumulation_m);
+            }
+        }
+        stats
+    }
+
+    /// Breadth-first ring growth of the current component (`self.component`) into the shared
+    /// target set (algorithm.md §5.1, release sign A(n) + Z(n) − Z(ũ)). Returns pixels filled.
+    fn predict(
+        &mut self,
+        config: &OcclusionConfig,
+        depth_m: &DepthMeters,
+        accumulation_m: &mut DepthMeters,
+    ) -> usize {
+        let (width, height) = (self.width, self.height);
+        let epoch = next_epoch(&mut self.source_epoch, &mut self.source_stamp);
+        self.frontier.clear();
+        for &p in &self.component {
+            self.source_stamp[p as usize] = epoch;
+            self.frontier.push(p);
+        }
+        let z = depth_m.as_slice();
+        let gate = config.prediction_depth_gate_m;
+        let mut filled = 0;
+        loop {
+            // Candidates: interior target pixels 4-adjacent to the last ring (or the component).
+            let ring = next_epoch(&mut self.candidate_epoch, &mut self.candidate_stamp);
+            self.candidates.clear();
+            for &f in &self.frontier {
+                let (x, y) = (f as usize % width, f as usize / width);
+                for &(dx, dy) in &NEIGHBOURS_4 {
+                    let Some(n) = neighbour(x, y, dx, dy, width, height) else {
+                        continue;
+                    };
+                    let (nx, ny) = (n % width, n / width);
+                    let interior = nx > 0 && ny > 0 && nx + 1 < width && ny + 1 < height;
+                    if interior && self.target[n] != 0 && self.candidate_stamp[n] != ring {
+                        self.candidate_stamp[n] = ring;
+                        self.candidates.push(n as u32);
+                    }
+                }
+            }
+            // Synchronous ring: every value uses A and the source set from before the ring.
+            self.updates.clear();
+            let mut terms = 0;
+            for &u in &self.candidates {
+                let u = u as usize;
+                let (x, y) = (u % width, u / width);
+                let (mut sum, mut count) = (0.0f32, 0usize);
+                for &(dx, dy) in &NEIGHBOURS_4 {
+                    // Candidates are interior, so every 4-neighbour exists.
+                    let n = (y as isize + dy) as usize * width + (x as isize + dx) as usize;
+                    if self.source_stamp[n] == epoch && (z[n] - z[u]).abs() < gate {
+                        sum += accumulation_m.as_slice()[n] + z[n] - z[u];
+                        count += 1;
+                    }
+                }
+                if count > 0 {
+                    self.updates.push((u as u32, sum / count as f32));
+                    terms += count;
+                }
+            }
+            self.frontier.clear();
+            let a = accumulation_m.as_mut_slice();
+            for &(u, value) in &self.updates {
+                let u = u as usize;
+                a[u] = value;
+                self.target[u] = 0;
+                self.source_stamp[u] = epoch;
+                self.frontier.push(u as u32);
+            }
+            filled += self.updates.len();
+            if self.updates.is_empty() || terms <= config.prediction_stop_terms {
+                break;
+            }
+        }
+        filled
+    }
+
+    /// Step 12: erases (from A and O) every 8-connected component of `predicted` that has no
+    /// pixel adjacent to an object pixel outside `predicted`. Returns the pixels erased.
+    pub(super) fn prune_unattached_predictions(
+        &mut self,
+        adjacency: Adjacency,
+        predicted: &Image<u8>,
+        mask: &mut Mask,
+        accumulation_m: &mut DepthMeters,
+    ) -> usize {
+        let (width, height) = (self.width, self.height);
+        let p = predicted.as_slice();
+        for (label, &value) in self.labels.iter_mut().zip(p) {
+            *label = if value != 0 { UNLABELLED } else { 0 };
+        }
+        let neighbours: &[(isize, isize)] = match adjacency {
+            Adjacency::Four => &NEIGHBOURS_4,
+            Adjacency::Eight => &NEIGHBOURS_8,
+        };
+        let mut pruned = 0;
+        let mut next_id = 0u32;
+        for seed in 0..self.labels.len() {
+            if self.labels[seed] != UNLABELLED {
+                continue;
+            }
+            next_id += 1;
+            self.flood(seed, next_id);
+            let m = mask.as_slice();
+            let attached = self.component.iter().any(|&q| {
+                let (x, y) = (q as usize % width, q as usize / width);
+                neighbours.iter().any(|&(dx, dy)| {
+                    neighbour(x, y, dx, dy, width, height).is_some_and(|n| m[n] != 0 && p[n] == 0)
+                })
+            });
+            if !attached {
+                let (m, a) = (mask.as_mut_slice(), accumulation_m.as_mut_slice());
+                for &q in &self.component {
+                    m[q as usize] = 0;
+                    a[q as usize] = 0.0;
+                }
+                pruned += self.component.len();
+            }
+        }
+        pruned
+    }
+}

@@ -1,0 +1,421 @@
+//! Occlusion-accumulation moving-object detector (Kim, Kim & Kim, ICRA 2020).
+//!
+//! Per frame, with the camera motion `current_from_previous` (= exp(ξ_i^{i+1}), see
+//! [`crate::geometry`]), the detector runs algorithm.md §1 steps 2–13 in the authors' order:
+//!
+//! 1. warp field: back-project pixel u with the *previous* compensated depth Zc_i(u), move it by
+//!    `previous_from_current` = exp(−ξ), project, round to the nearest pixel n(u) (valid only
+//!    inside [0, W−1] × [0, H−1] and for z > 0);
+//! 2. depth compensation: Zc_{i+1}(u) = Z_{i+1}(u) if measured, else S(u) = Zc_i(n(u));
+//! 3. occlusion map ΔZ(u) = S(u) − Zc_{i+1}(u) (0 where the warp is invalid);
+//! 4. carry A and P along the same warp, A ← Â + ΔZ;
+//! 5. truncations: A ← 0 where A ≤ τ_α, then where ΔZ ≤ −τ_β (τ = α·Z or α·Z², see
+//!    [`ThresholdForm`]);
+//! 6. newly discovered area Ñ: current depth known but the warped previous depth is not;
+//! 7. 8-connected labelling of {A > τ_α}; components smaller than the (area-scaled) object
+//!    threshold are erased from A, larger ones grow their accumulation into Ñ by breadth-first
+//!    rings (§5.1, the release's sign A(n) + Z(n) − Z(ũ), 5 cm depth gate);
+//! 8. O = {A > τ_α}; predicted components of P = (P̂ ∨ Ñ) ∧ O that do not touch a non-predicted
+//!    object pixel (4-adjacency, §5.3 recommendation) are erased from A and O;
+//! 9. the mask is O.
+//!
+//! The detector owns every buffer: after the first frame, [`OcclusionDetector::update`] does not
+//! allocate. The per-pixel transport (steps 1–6) is a row-parallel kernel with a scalar
+//! reference ([`transport::transport_scalar`]) and a test that they agree.
+
+mod components;
+pub mod transport;
+
+use std::time::Instant;
+
+use nalgebra::Isometry3;
+
+use crate::error::{Error, Result};
+use crate::geometry::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, Image, ImageSize, Mask, MASK_SET};
+
+use components::Components;
+use transport::{TransportInputs, TransportOutputs};
+
+/// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ThresholdForm {
+    /// τ = coefficient · Z (the authors' release; coefficients in m/m, i.e. unitless).
+    #[default]
+    Linear,
+    /// τ = coefficient · Z² (the paper's Eq. 4; coefficients in 1/m).
+    Quadratic,
+}
+
+/// Adjacency used by the pruning test of predicted areas (algorithm.md §5.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Adjacency {
+    /// Left, right, up, down (the release's stencil intent).
+    #[default]
+    Four,
+    /// The 8 surrounding pixels.
+    Eight,
+}
+
+/// Every parameter of the detector, with the release defaults (algorithm.md §2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OcclusionConfig {
+    /// α of τ_α: accumulation below τ_α is not an object (unitless for linear, 1/m for quadratic).
+    pub alpha: f32,
+    /// β of τ_β: a depth increase ΔZ ≤ −τ_β (background reappears) resets the accumulation.
+    pub beta: f32,
+    /// Linear (release) or quadratic (paper) thresholds.
+    pub threshold_form: ThresholdForm,
+    /// Minimum object component size at 640 × 480 in pixels; scaled by image area (§9-Q13).
+    pub min_object_pixels_vga: usize,
+    /// Prediction only crosses 4-neighbour edges whose depth step is below this (m).
+    pub prediction_depth_gate_m: f32,
+    /// Prediction stops after a ring that contributed at most this many neighbour terms.
+    pub prediction_stop_terms: usize,
+    /// Grow accumulation into the newly discovered area (§5); off = skip prediction and pruning.
+    pub predict_newly_discovered: bool,
+    /// Adjacency of the pruning test.
+    pub prune_adjacency: Adjacency,
+}
+
+impl Default for OcclusionConfig {
+    fn default() -> Self {
+        Self {
+            alpha: 0.15,
+            beta: 0.225,
+            threshold_form: ThresholdForm::Linear,
+            min_object_pixels_vga: 500,
+            prediction_depth_gate_m: 0.05,
+            prediction_stop_terms: 10,
+            predict_newly_discovered: true,
+            prune_adjacency: Adjacency::Four,
+        }
+    }
+}
+
+/// Pixels of a VGA image, the resolution the object threshold is given for.
+const VGA_PIXELS: usize = 640 * 480;
+
+impl OcclusionConfig {
+    /// Checks every parameter.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the first bad parameter.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |name: &'static str, value: f32| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::InvalidParameter {
+                    name,
+                    value: value.to_string(),
+                    expected: "a finite number > 0".into(),
+                })
+            }
+        };
+        positive("alpha", self.alpha)?;
+        positive("beta", self.beta)?;
+        positive("prediction_depth_gate_m", self.prediction_depth_gate_m)?;
+        Ok(())
+    }
+
+    /// Minimum object component size for an image of `size` (500 px × area / VGA area, ≥ 1).
+    pub fn min_object_pixels(&self, size: ImageSize) -> usize {
+        ((self.min_object_pixels_vga as f64 * size.area() as f64 / VGA_PIXELS as f64).round() as usize).max(1)
+    }
+
+    /// τ for depth `z_m` with coefficient `coefficient` in this config's form.
+    #[inline]
+    pub fn threshold(&self, coefficient: f32, z_m: f32) -> f32 {
+        match self.threshold_form {
+            ThresholdForm::Linear => coefficient * z_m,
+            ThresholdForm::Quadratic => coefficient * z_m * z_m,
+        }
+    }
+}
+
+/// What happened in the last update (counts in pixels, times in µs).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct OcclusionStats {
+    /// Pixels with a valid warp.
+    pub warped_pixels: usize,
+    /// Newly discovered pixels (Ñ).
+    pub newly_discovered_pixels: usize,
+    /// Object components before size suppression.
+    pub components: usize,
+    /// Components erased for being smaller than the object threshold.
+    pub small_components_erased: usize,
+    /// Pixels filled by prediction.
+    pub predicted_pixels: usize,
+    /// Pixels removed by pruning.
+    pub pruned_pixels: usize,
+    /// Pixels in the final mask.
+    pub mask_pixels: usize,
+    /// Time of the transport kernel (warp, compensation, ΔZ, accumulation, truncation, Ñ), µs.
+    pub transport_us: u64,
+    /// Time of labelling, suppression and prediction, µs.
+    pub label_predict_us: u64,
+    /// Time of the object mask and pruning, µs.
+    pub prune_us: u64,
+}
+
+/// Per-sequence detector state (algorithm.md §1: Zc, A, P, B and scratch buffers).
+#[derive(Debug, Clone)]
+pub struct OcclusionDetector {
+    config: OcclusionConfig,
+    intrinsics: PinholeIntrinsics,
+    size: ImageSize,
+    min_object_pixels: usize,
+    frames: u64,
+    /// Normalised ray x per column: (x − cx) / fx.
+    ray_x: Vec<f64>,
+    /// Normalised ray y per row: (y − cy) / fy.
+    ray_y: Vec<f64>,
+    /// Compensated depth of the latest frame (m).
+    compensated_m: DepthMeters,
+    /// Accumulation map A of the latest frame (m).
+    accumulation_m: DepthMeters,
+    /// Predicted-area map P (0 / 1).
+    predicted: Image<u8>,
+    /// The final mask O.
+    mask: Mask,
+    // Scratch (next-frame buffers, swapped in).
+    compensated_next_m: DepthMeters,
+    accumulation_next_m: DepthMeters,
+    predicted_carried: Image<u8>,
+    delta_z_m: DepthMeters,
+    newly_discovered: Image<u8>,
+    components: Components,
+    stats: OcclusionStats,
+}
+
+impl OcclusionDetector {
+    /// A detector for `size` images with `intrinsics`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for a bad config, invalid intrinsics or an empty size.
+    pub fn new(size: ImageSize, intrinsics: PinholeIntrinsics, config: OcclusionConfig) -> Result<Self> {
+        config.validate()?;
+        if !intrinsics.is_valid() {
+            return Err(Error::InvalidParameter {
+                name: "intrinsics",
+                value: format!("{intrinsics:?}"),
+                expected: "finite values with fx, fy > 0".into(),
+            });
+        }
+        if size.area() == 0 || size.width > u32::MAX as usize / size.height.max(1) {
+            return Err(Error::InvalidParameter {
+                name: "image size",
+                value: size.to_string(),
+                expected: "a non-empty image with fewer than 2^32 pixels".into(),
+            });
+        }
+        let depth = || Image::filled(size, 0.0f32);
+        Ok(Self {
+            config,
+            intrinsics,
+            size,
+            min_object_pixels: config.min_object_pixels(size),
+            frames: 0,
+            ray_x: (0..size.width)
+                .map(|x| (x as f64 - intrinsics.cx) / intrinsics.fx)
+                .collect(),
+            ray_y: (0..size.height)
+                .map(|y| (y as f64 - intrinsics.cy) / intrinsics.fy)
+                .collect(),
+            compensated_m: depth(),
+            accumulation_m: depth(),
+            predicted: Image::filled(size, 0),
+            mask: Image::filled(size, 0),
+            compensated_next_m: depth(),
+            accumulation_next_m: depth(),
+            predicted_carried: Image::filled(size, 0),
+            delta_z_m: depth(),
+            newly_discovered: Image::filled(size, 0),
+            components: Components::new(size),
+            stats: OcclusionStats::default(),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &OcclusionConfig {
+        &self.config
+    }
+
+    /// Image size.
+    pub fn size(&self) -> ImageSize {
+        self.size
+    }
+
+    /// Number of frames processed since construction or [`reset`](Self::reset).
+    pub fn frames_processed(&self) -> u64 {
+        self.frames
+    }
+
+    /// Forgets the sequence: the next frame is treated as the first one.
+    pub fn reset(&mut self) {
+        self.frames = 0;
+        self.accumulation_m.fill(0.0);
+        self.predicted.fill(0);
+        self.mask.fill(0);
+        self.compensated_m.fill(0.0);
+    }
+
+    /// The accumulation map A (m): 0 or above τ_α after every update.
+    pub fn accumulation_m(&self) -> &DepthMeters {
+        &self.accumulation_m
+    }
+
+    /// The compensated depth Zc of the latest frame (m, 0 = unknown).
+    pub fn compensated_depth_m(&self) -> &DepthMeters {
+        &self.compensated_m
+    }
+
+    /// The occlusion map ΔZ of the latest frame (m).
+    pub fn occlusion_m(&self) -> &DepthMeters {
+        &self.delta_z_m
+    }
+
+    /// Newly discovered area Ñ of the latest frame (0 / 1).
+    pub fn newly_discovered(&self) -> &Image<u8> {
+        &self.newly_discovered
+    }
+
+    /// Predicted-area map P of the latest frame (0 / 1).
+    pub fn predicted_area(&self) -> &Image<u8> {
+        &self.predicted
+    }
+
+    /// The latest moving-object mask.
+    pub fn mask(&self) -> &Mask {
+        &self.mask
+    }
+
+    /// Statistics of the latest update.
+    pub fn stats(&self) -> &OcclusionStats {
+        &self.stats
+    }
+
+    /// Processes the next frame's depth with the camera motion from the previous frame and
+    /// returns the moving-object mask. The first frame only initialises the state (empty mask).
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when `depth_m` is not the detector's size.
+    pub fn update(&mut self, depth_m: &DepthMeters, current_from_previous: &Isometry3<f64>) -> Result<&Mask> {
+        if depth_m.size() != self.size {
+            return Err(Error::SizeMismatch {
+                what: "occlusion detector depth".into(),
+                expected: self.size,
+                found: depth_m.size(),
+            });
+        }
+        self.stats = OcclusionStats::default();
+        if self.frames == 0 {
+            self.compensated_m.copy_from(depth_m)?;
+            self.accumulation_m.fill(0.0);
+            self.predicted.fill(0);
+            self.mask.fill(0);
+            self.delta_z_m.fill(0.0);
+            self.newly_discovered.fill(0);
+            self.frames = 1;
+            return Ok(&self.mask);
+        }
+        self.frames += 1;
+
+        let started = Instant::now();
+        let previous_from_current = current_from_previous.inverse();
+        let inputs = TransportInputs {
+            ray_x: &self.ray_x,
+            ray_y: &self.ray_y,
+            intrinsics: &self.intrinsics,
+            previous_from_current: &previous_from_current,
+            config: &self.config,
+            depth_m,
+            compensated_previous_m: &self.compensated_m,
+            accumulation_previous_m: &self.accumulation_m,
+            predicted_previous: &self.predicted,
+        };
+        let outputs = TransportOutputs {
+            compensated_m: &mut self.compensated_next_m,
+            accumulation_m: &mut self.accumulation_next_m,
+            predicted_carried: &mut self.predicted_carried,
+            delta_z_m: &mut self.delta_z_m,
+            newly_discovered: &mut self.newly_discovered,
+        };
+        let counts = transport::transport(&inputs, outputs);
+        self.stats.warped_pixels = counts.warped;
+        self.stats.newly_discovered_pixels = counts.newly_discovered;
+        std::mem::swap(&mut self.compensated_m, &mut self.compensated_next_m);
+        std::mem::swap(&mut self.accumulation_m, &mut self.accumulation_next_m);
+        self.stats.transport_us = started.elapsed().as_micros() as u64;
+
+        let started = Instant::now();
+        let label_stats = self.components.suppress_and_predict(
+            &self.config,
+            self.min_object_pixels,
+            &self.compensated_m,
+            &self.newly_discovered,
+            &mut self.accumulation_m,
+        );
+        self.stats.components = label_stats.components;
+        self.stats.small_components_erased = label_stats.small_components_erased;
+        self.stats.predicted_pixels = label_stats.predicted_pixels;
+        self.stats.label_predict_us = started.elapsed().as_micros() as u64;
+
+        let started = Instant::now();
+        object_mask(
+            &self.config,
+            &self.compensated_m,
+            &self.accumulation_m,
+            &mut self.mask,
+        );
+        if self.config.predict_newly_discovered {
+            // P = (P̂ ∨ Ñ) ∧ O, binary (algorithm.md §1 step 12, §5.3).
+            for (((p, &carried), &newly), &object) in self
+                .predicted
+                .as_mut_slice()
+                .iter_mut()
+                .zip(self.predicted_carried.as_slice())
+                .zip(self.newly_discovered.as_slice())
+                .zip(self.mask.as_slice())
+            {
+                *p = u8::from((carried != 0 || newly != 0) && object != 0);
+            }
+            self.stats.pruned_pixels = self.components.prune_unattached_predictions(
+                self.config.prune_adjacency,
+                &self.predicted,
+                &mut self.mask,
+                &mut self.accumulation_m,
+            );
+        } else {
+            self.predicted.fill(0);
+        }
+        self.stats.mask_pixels = self.mask.as_slice().iter().filter(|&&m| m != 0).count();
+        self.stats.prune_us = started.elapsed().as_micros() as u64;
+        Ok(&self.mask)
+    }
+}
+
+/// O = {A > τ_α} (algorithm.md §1 step 11).
+fn object_mask(
+    config: &OcclusionConfig,
+    compensated_m: &DepthMeters,
+    accumulation_m: &DepthMeters,
+    mask: &mut Mask,
+) {
+    for ((m, &a), &z) in mask
+        .as_mut_slice()
+        .iter_mut()
+        .zip(accumulation_m.as_slice())
+        .zip(compensated_m.as_slice())
+    {
+        *m = if a > config.threshold(config.alpha, z) {
+            MASK_SET
+        } else {
+            0
+        };
+    }
+}
+
+#[cfg(test)]
+mod tests;
