@@ -13,6 +13,7 @@ pub mod contour;
 pub mod convert;
 pub mod dataset;
 pub mod error;
+pub mod evaluate;
 pub mod geometry;
 pub mod image_buf;
 pub mod mcap_io;

@@ -211,7 +211,7 @@ struct Queued {
 }
 
 enum Pairing {
-    Pair(Queued, Queued),
+    Pair(Box<(Queued, Queued)>),
     UnpairedColor,
     UnpairedDepth,
 }
@@ -227,15 +227,11 @@ impl Pairer {
     fn next(&mut self, end_of_stream: bool) -> Option<Pairing> {
         let tol = self.tolerance_ns;
         let (Some(c), Some(d)) = (self.color.front(), self.depth.front()) else {
-            if end_of_stream || self.color.len() > MAX_QUEUED_IMAGES {
-                if self.color.pop_front().is_some() {
-                    return Some(Pairing::UnpairedColor);
-                }
+            if (end_of_stream || self.color.len() > MAX_QUEUED_IMAGES) && self.color.pop_front().is_some() {
+                return Some(Pairing::UnpairedColor);
             }
-            if end_of_stream || self.depth.len() > MAX_QUEUED_IMAGES {
-                if self.depth.pop_front().is_some() {
-                    return Some(Pairing::UnpairedDepth);
-                }
+            if (end_of_stream || self.depth.len() > MAX_QUEUED_IMAGES) && self.depth.pop_front().is_some() {
+                return Some(Pairing::UnpairedDepth);
             }
             return None;
         };
@@ -264,7 +260,7 @@ impl Pairer {
         }
         let c = self.color.pop_front()?;
         let d = self.depth.pop_front()?;
-        Some(Pairing::Pair(c, d))
+        Some(Pairing::Pair(Box::new((c, d))))
     }
 
     fn oldest_color_log_time(&self) -> Option<u64> {
@@ -542,7 +538,10 @@ impl FrameLoop {
             match p {
                 Pairing::UnpairedColor => self.report.unpaired_color += 1,
                 Pairing::UnpairedDepth => self.report.unpaired_depth += 1,
-                Pairing::Pair(c, d) => self.frame(ctx, writer, make_processor, hooks, c, d)?,
+                Pairing::Pair(pair) => {
+                    let (c, d) = *pair;
+                    self.frame(ctx, writer, make_processor, hooks, c, d)?
+                }
             }
         }
         let limit = if end_of_stream {
@@ -685,4 +684,20 @@ impl FrameLoop {
         });
         Ok(())
     }
+}
+
+/// The production [`ProcessorFactory`]: the per-sequence pipeline (DVO + detector).
+///
+/// # Errors
+/// Until the pipeline is merged into this branch: always [`Error::InvalidParameter`].
+pub fn pipeline_factory(
+    _intrinsics: PinholeIntrinsics,
+    _size: ImageSize,
+    _mode: PoseMode,
+) -> Result<Box<dyn FrameProcessor>> {
+    Err(Error::InvalidParameter {
+        name: "pipeline",
+        value: "missing".into(),
+        expected: "a build with the DVO + detector pipeline".into(),
+    })
 }

@@ -2,6 +2,8 @@
 //! encoding, annotated copies that keep every input record byte for byte, sidecars, the
 //! linear fallback, determinism and the error messages users see.
 
+#![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
+
 mod process_support;
 
 use std::collections::BTreeMap;

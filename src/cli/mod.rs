@@ -5,6 +5,8 @@
 //! one match arm in [`run`].
 
 pub mod convert;
+pub mod eval;
+pub mod process;
 
 use clap::{Parser, Subcommand};
 
@@ -26,6 +28,10 @@ pub struct Args {
 pub enum Command {
     /// Convert an RGB-D dataset folder (TUM, ICSL, LARR) into an MCAP file for Foxglove.
     Convert(convert::ConvertArgs),
+    /// Annotate RGB-D MCAP files with moving-object masks and odometry (several in parallel).
+    Process(Box<process::ProcessArgs>),
+    /// Score an annotated file against its ground-truth masks and poses (F1, RPE, ATE).
+    Eval(eval::EvalArgs),
 }
 
 /// Options every subcommand sees.
@@ -68,6 +74,8 @@ pub fn run(args: Args) -> anyhow::Result<Outcome> {
     let globals = Globals { quiet: args.quiet };
     match args.command {
         Command::Convert(a) => convert::run(a, &globals),
+        Command::Process(a) => process::run(*a, &globals),
+        Command::Eval(a) => eval::run(a, &globals),
     }
 }
 
@@ -116,7 +124,9 @@ mod tests {
         ])
         .unwrap();
         assert!(args.quiet);
-        let Command::Convert(c) = args.command;
+        let Command::Convert(c) = args.command else {
+            panic!("expected convert")
+        };
         let convert::Dataset::Tum(t) = c.dataset else {
             panic!("expected tum")
         };

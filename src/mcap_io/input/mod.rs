@@ -378,7 +378,7 @@ impl McapInput {
             return Ok(None);
         };
         let mut found = None;
-        self.for_each_message(Some(&[channel.topic.clone()]), None, |m| {
+        self.for_each_message(Some(std::slice::from_ref(&channel.topic)), None, |m| {
             if m.header.channel_id == id {
                 found = Some(m);
                 return Ok(false);

@@ -1,0 +1,510 @@
+//! `occmask process`: annotate RGB-D MCAP files with mask and odometry channels, several
+//! files in parallel.
+
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context};
+use clap::{Args as ClapArgs, ValueEnum};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
+
+use occmask::dataset;
+use occmask::image_buf::Mask;
+use occmask::mcap_io::annotate::AnnotateOptions;
+use occmask::mcap_io::input::detect::TopicOverrides;
+use occmask::mcap_io::input::McapInput;
+use occmask::mcap_io::writer::{
+    Compression, McapWriteOptions, DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_COMPRESSION_THREADS,
+};
+use occmask::mcap_io::AtomicOutput;
+use occmask::process::{
+    process_file, PoseMode, ProcessConfig, ProcessHooks, ProcessReport, DEFAULT_MAX_POSE_GAP_NS,
+    DEFAULT_PAIR_TOLERANCE_NS,
+};
+use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
+use occmask::trajectory::to_tum_text;
+
+use super::convert::CompressionArg;
+use super::{Globals, Outcome};
+
+const AFTER_HELP: &str = "\
+Examples:
+  occmask process run.mcap -o run.occmask.mcap
+  occmask process a.mcap b.mcap c.mcap --out-dir annotated/ --sidecar
+  occmask process bag.mcap -o out.mcap --rgb-topic /camera/camera/color/image_raw \\
+      --depth-topic /camera/camera/aligned_depth_to_color/image_raw
+  occmask process tum.mcap -o ext.mcap --pose-topic /groundtruth/pose --export-masks masks/
+
+Topics are found by schema (foxglove.RawImage/CompressedImage/CameraCalibration in protobuf
+or JSON, sensor_msgs/msg/Image/CompressedImage/CameraInfo in CDR) unless given. Depth units:
+--depth-units-per-meter, else the channel metadata depth_units_per_meter, else millimetres
+(ROS REP 118); 32FC1 depth is metres. Exit code 1 when any file failed.";
+
+/// Pose source choices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PoseArg {
+    /// DVO with the mask fed back (the paper's closed loop).
+    Dvo,
+    /// DVO without the mask feedback (the paper's "Robust DVO" baseline).
+    DvoUnmasked,
+}
+
+/// Arguments of `occmask process`.
+#[derive(Debug, ClapArgs)]
+#[command(after_help = AFTER_HELP)]
+pub struct ProcessArgs {
+    /// Input MCAP files (never modified).
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+
+    /// Output file (one input only).
+    #[arg(short, long, conflicts_with = "out_dir", required_unless_present = "out_dir")]
+    pub output: Option<PathBuf>,
+
+    /// Output folder: each input X.mcap becomes DIR/X.occmask.mcap.
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+
+    /// Pose source when no --pose-topic is given.
+    #[arg(long, value_enum, default_value_t = PoseArg::Dvo, conflicts_with = "pose_topic")]
+    pub pose: PoseArg,
+
+    /// Use poses from this topic (foxglove PoseInFrame/FrameTransform(s), ROS 2
+    /// PoseStamped/TransformStamped/TFMessage) instead of DVO, interpolated to each frame.
+    #[arg(long)]
+    pub pose_topic: Option<String>,
+
+    /// With a transform --pose-topic: the child frame to follow (default: the first one seen).
+    #[arg(long, requires = "pose_topic")]
+    pub pose_frame: Option<String>,
+
+    /// Colour image topic (default: detected by schema).
+    #[arg(long)]
+    pub rgb_topic: Option<String>,
+
+    /// Depth image topic (default: detected by schema and encoding).
+    #[arg(long)]
+    pub depth_topic: Option<String>,
+
+    /// Calibration topic (default: the one beside the colour or depth topic).
+    #[arg(long)]
+    pub camera_info_topic: Option<String>,
+
+    /// Intrinsics instead of a calibration topic: fr1, fr2, fr3, icsl, larr, kinect-default or
+    /// FX,FY,CX,CY in pixels.
+    #[arg(long, value_parser = parse_camera_arg)]
+    pub camera: Option<String>,
+
+    /// Raw 16-bit depth units per metre (overrides channel metadata; default 1000 = mm).
+    #[arg(long, value_parser = parse_positive)]
+    pub depth_units_per_meter: Option<f64>,
+
+    /// Skip frames before this many seconds after the first colour image.
+    #[arg(long, value_parser = parse_seconds)]
+    pub start: Option<u64>,
+
+    /// Stop at this many seconds after the first colour image.
+    #[arg(long, value_parser = parse_seconds)]
+    pub end: Option<u64>,
+
+    /// Largest colour/depth stamp difference of a pair, milliseconds.
+    #[arg(long, value_parser = parse_non_negative, default_value_t = DEFAULT_PAIR_TOLERANCE_NS as f64 / 1e6)]
+    pub max_pair_gap_ms: f64,
+
+    /// Write only the new channels (open it together with the input in Foxglove).
+    #[arg(long)]
+    pub sidecar: bool,
+
+    /// Also write the accumulation map as /occmask/accumulation (32FC1, for debugging).
+    #[arg(long)]
+    pub accumulation: bool,
+
+    /// Measure per-frame decode/processing times into /occmask/stats (output bytes then
+    /// differ between runs).
+    #[arg(long)]
+    pub timings: bool,
+
+    /// Write the estimated trajectory in TUM format (one input only).
+    #[arg(long)]
+    pub export_trajectory: Option<PathBuf>,
+
+    /// Write one PNG mask per frame, named <timestamp>.png (one input only).
+    #[arg(long)]
+    pub export_masks: Option<PathBuf>,
+
+    /// Replace existing output files.
+    #[arg(short, long)]
+    pub force: bool,
+
+    /// Files processed at the same time (default: the number of cores).
+    #[arg(short, long)]
+    pub jobs: Option<usize>,
+
+    /// Chunk compression.
+    #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
+    pub compression: CompressionArg,
+}
+
+fn parse_camera_arg(text: &str) -> Result<String, String> {
+    dataset::parse_camera(text)
+        .map(|_| text.to_owned())
+        .map_err(|e| e.to_string())
+}
+
+fn parse_positive(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a positive number, found {text:?}")),
+    }
+}
+
+fn parse_non_negative(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("expected a number >= 0, found {text:?}")),
+    }
+}
+
+fn parse_seconds(text: &str) -> Result<u64, String> {
+    parse_seconds_to_ns(text)
+}
+
+/// One input's plan.
+struct Job {
+    input: PathBuf,
+    output: PathBuf,
+}
+
+/// One input's result.
+struct JobResult {
+    input: PathBuf,
+    outcome: Result<(ProcessReport, f64), String>,
+}
+
+fn output_name(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    PathBuf::from(format!("{stem}.occmask.mcap"))
+}
+
+fn plan(args: &ProcessArgs) -> anyhow::Result<Vec<Job>> {
+    let mut jobs = Vec::new();
+    match (&args.output, &args.out_dir) {
+        (Some(out), None) => {
+            if args.inputs.len() != 1 {
+                bail!(
+                    "-o/--output takes one input, found {}; use --out-dir DIR for several",
+                    args.inputs.len()
+                );
+            }
+            jobs.push(Job {
+                input: args.inputs[0].clone(),
+                output: out.clone(),
+            });
+        }
+        (None, Some(dir)) => {
+            if !dir.is_dir() {
+                bail!("--out-dir {}: not an existing folder", dir.display());
+            }
+            for input in &args.inputs {
+                jobs.push(Job {
+                    input: input.clone(),
+                    output: dir.join(output_name(input)),
+                });
+            }
+        }
+        _ => bail!("give either -o/--output or --out-dir"),
+    }
+    for (i, a) in jobs.iter().enumerate() {
+        if jobs[..i].iter().any(|b| b.output == a.output) {
+            bail!(
+                "two inputs would both write {} (same file name): process them separately",
+                a.output.display()
+            );
+        }
+    }
+    if args.inputs.len() > 1 && (args.export_trajectory.is_some() || args.export_masks.is_some()) {
+        bail!(
+            "--export-trajectory and --export-masks take one input, found {}",
+            args.inputs.len()
+        );
+    }
+    Ok(jobs)
+}
+
+fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
+    let intrinsics = args
+        .camera
+        .as_deref()
+        .map(dataset::parse_camera)
+        .transpose()
+        .context("--camera")?;
+    let pose_mode = match (&args.pose_topic, args.pose) {
+        (Some(_), _) => PoseMode::External,
+        (None, PoseArg::Dvo) => PoseMode::Dvo,
+        (None, PoseArg::DvoUnmasked) => PoseMode::DvoUnmasked,
+    };
+    if let (Some(s), Some(e)) = (args.start, args.end) {
+        if e <= s {
+            bail!("--end must be after --start");
+        }
+    }
+    Ok(ProcessConfig {
+        topics: TopicOverrides {
+            rgb: args.rgb_topic.clone(),
+            depth: args.depth_topic.clone(),
+            camera_info: args.camera_info_topic.clone(),
+            pose: args.pose_topic.clone(),
+        },
+        intrinsics,
+        depth_units_per_meter: args.depth_units_per_meter,
+        pose_mode,
+        pose_child_frame: args.pose_frame.clone(),
+        pair_tolerance_ns: (args.max_pair_gap_ms * 1e6).round() as u64,
+        max_pose_gap_ns: DEFAULT_MAX_POSE_GAP_NS,
+        start_offset_ns: args.start,
+        end_offset_ns: args.end,
+        timings: args.timings,
+        annotate: AnnotateOptions {
+            copy_input: !args.sidecar,
+            accumulation: args.accumulation,
+            write: McapWriteOptions {
+                compression: match args.compression {
+                    CompressionArg::Zstd => Compression::Zstd,
+                    CompressionArg::Lz4 => Compression::Lz4,
+                    CompressionArg::None => Compression::None,
+                },
+                chunk_size_bytes: DEFAULT_CHUNK_SIZE_BYTES,
+                compression_threads: DEFAULT_COMPRESSION_THREADS,
+            },
+            ..Default::default()
+        },
+    })
+}
+
+/// Progress and `--export-masks`.
+struct Hooks<'a> {
+    bar: &'a ProgressBar,
+    total: &'a ProgressBar,
+    reported: u64,
+    masks_dir: Option<&'a Path>,
+}
+
+/// Progress is drawn every this many messages: cheap, and still smooth at 100 messages/s.
+const PROGRESS_STEP_MESSAGES: u64 = 32;
+
+impl ProcessHooks for Hooks<'_> {
+    fn messages_read(&mut self, count: u64) {
+        if count - self.reported >= PROGRESS_STEP_MESSAGES {
+            self.bar.inc(count - self.reported);
+            self.total.inc(count - self.reported);
+            self.reported = count;
+        }
+    }
+
+    fn frame_done(&mut self, timestamp_ns: u64, mask: &Mask) -> occmask::Result<()> {
+        let Some(dir) = self.masks_dir else {
+            return Ok(());
+        };
+        let path = dir.join(format!("{}.png", format_ns_as_seconds(timestamp_ns, 6)));
+        let img = image::GrayImage::from_raw(
+            mask.width() as u32,
+            mask.height() as u32,
+            mask.as_slice().to_vec(),
+        )
+        .ok_or_else(|| occmask::Error::BufferLength {
+            expected: mask.size().area(),
+            found: mask.as_slice().len(),
+            size: mask.size(),
+        })?;
+        img.save_with_format(&path, image::ImageFormat::Png)
+            .map_err(|e| occmask::Error::BadImage {
+                path: path.clone(),
+                message: format!("cannot write mask PNG: {e}"),
+            })
+    }
+}
+
+fn run_one(
+    job: &Job,
+    args: &ProcessArgs,
+    config: &ProcessConfig,
+    all_inputs: &[&Path],
+    bar: &ProgressBar,
+    total: &ProgressBar,
+) -> anyhow::Result<ProcessReport> {
+    let input = McapInput::open(&job.input).with_context(|| format!("reading {}", job.input.display()))?;
+    if let Some(n) = input.message_count() {
+        bar.set_length(n);
+    }
+    let (output, file) = AtomicOutput::create(&job.output, args.force, all_inputs)?;
+    let mut hooks = Hooks {
+        bar,
+        total,
+        reported: 0,
+        masks_dir: args.export_masks.as_deref(),
+    };
+    if let Some(dir) = &args.export_masks {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create --export-masks {}", dir.display()))?;
+    }
+    let mut factory = occmask::process::pipeline_factory;
+    let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
+        .with_context(|| format!("processing {}", job.input.display()))?;
+    let file = sink
+        .into_inner()
+        .map_err(|e| anyhow!("cannot write {}: {}", output.temp_path().display(), e.error()))?;
+    if report.frames == 0 {
+        bail!(
+            "{}: no colour/depth pair was processed ({} colour, {} depth messages, {} unpaired colour, \
+             {} outside --start/--end, {} outside the pose stream); check the topics, --max-pair-gap-ms \
+             and the time range",
+            job.input.display(),
+            report.color_messages,
+            report.depth_messages,
+            report.unpaired_color,
+            report.outside_time_range,
+            report.outside_pose_stream
+        );
+    }
+    output.commit(file)?;
+    if let Some(path) = &args.export_trajectory {
+        let (out, mut f) = AtomicOutput::create(path, args.force, all_inputs)?;
+        f.write_all(to_tum_text(&report.trajectory).as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        out.commit(f)?;
+    }
+    bar.set_position(bar.length().unwrap_or(0));
+    Ok(report)
+}
+
+fn style(template: &str) -> ProgressStyle {
+    ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar())
+}
+
+/// Runs `occmask process`.
+///
+/// # Errors
+/// Usage errors before anything runs; "N of M files failed" after the summary when any
+/// file failed (the others are still written).
+pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
+    let jobs = plan(&args)?;
+    let config = config(&args)?;
+    let all_inputs: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();
+
+    let multi = MultiProgress::with_draw_target(if globals.quiet {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    });
+    let total = multi.add(ProgressBar::new(0));
+    total.set_style(style("total {bar:30} {pos}/{len} messages {elapsed_precise}"));
+    let bars: Vec<ProgressBar> = jobs
+        .iter()
+        .map(|job| {
+            let bar = multi.add(ProgressBar::new(0));
+            bar.set_style(style("{prefix:30!} {bar:30} {pos}/{len} msgs {per_sec} {msg}"));
+            bar.set_prefix(
+                job.input
+                    .file_name()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+            );
+            bar
+        })
+        .collect();
+    for job in &jobs {
+        if let Ok(input) = McapInput::open(&job.input) {
+            total.inc_length(input.message_count().unwrap_or(0));
+        }
+    }
+
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.jobs.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")?;
+    let results = Mutex::new(Vec::new());
+    pool.install(|| {
+        jobs.par_iter().zip(&bars).for_each(|(job, bar)| {
+            let start = Instant::now();
+            let outcome = run_one(job, &args, &config, &all_inputs, bar, &total)
+                .map(|r| (r, start.elapsed().as_secs_f64()))
+                .map_err(|e| format!("{e:#}"));
+            match &outcome {
+                Ok(_) => bar.finish_with_message("done"),
+                Err(_) => bar.abandon_with_message("FAILED"),
+            }
+            if let Ok(mut r) = results.lock() {
+                r.push(JobResult {
+                    input: job.input.clone(),
+                    outcome,
+                });
+            }
+        });
+    });
+    total.finish();
+    let mut results = results
+        .into_inner()
+        .map_err(|_| anyhow!("a worker thread panicked"))?;
+    results.sort_by_key(|r| args.inputs.iter().position(|i| *i == r.input));
+
+    let failed = results.iter().filter(|r| r.outcome.is_err()).count();
+    if !globals.quiet {
+        print_summary(&results, &jobs);
+    }
+    for r in &results {
+        if let Err(e) = &r.outcome {
+            eprintln!("error: {}: {e}", r.input.display());
+        }
+    }
+    if failed > 0 {
+        bail!("{failed} of {} files failed", results.len());
+    }
+    // Unpaired frames and frames outside the pose stream are reported in the summary, not an
+    // error: colour and depth often run at different rates, and every input message is copied.
+    Ok(Outcome::Success)
+}
+
+fn print_summary(results: &[JobResult], jobs: &[Job]) {
+    let mut out = std::io::stderr().lock();
+    let _ = writeln!(
+        out,
+        "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7} {:>7}  output",
+        "input", "frames", "unp.col", "unp.dep", "no pose", "s", "fps"
+    );
+    for r in results {
+        let name = r
+            .input
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let output = jobs
+            .iter()
+            .find(|j| j.input == r.input)
+            .map(|j| j.output.display().to_string())
+            .unwrap_or_default();
+        match &r.outcome {
+            Ok((rep, secs)) => {
+                let _ = writeln!(
+                    out,
+                    "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}",
+                    name,
+                    rep.frames,
+                    rep.unpaired_color,
+                    rep.unpaired_depth,
+                    rep.outside_pose_stream,
+                    secs,
+                    rep.frames as f64 / secs.max(1e-9)
+                );
+            }
+            Err(_) => {
+                let _ = writeln!(out, "{name:<32} FAILED (see below)");
+            }
+        }
+    }
+}

@@ -1,0 +1,354 @@
+//! `occmask eval`: scores an output of `occmask process` against the ground truth in the same
+//! file (algorithm.md §7).
+//!
+//! - Segmentation: each `/occmask/mask` is compared with the `/groundtruth/mask` of the same
+//!   stamp; F1, precision and recall are averaged over frames with a non-empty ground truth
+//!   ([`crate::metrics::segmentation`]), frames with an empty ground truth report their
+//!   false-positive fraction instead.
+//! - Odometry: `/occmask/odometry` against `/groundtruth/pose`: RPE with Δ = 1 frame and
+//!   Δ = 150 frames (or the longest the sequence allows), `evaluate_rpe.py` semantics, and ATE
+//!   after rigid alignment, with ground truth interpolated to the estimated stamps.
+//!
+//! Masks stream through with bounded memory; poses are kept whole (64 bytes each).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::image_buf::{ImageSize, Mask, MASK_SET};
+use crate::mcap_io::annotate::{TOPIC_MASK, TOPIC_ODOMETRY};
+use crate::mcap_io::input::decode::{decode_image, decode_poses, ImagePayload};
+use crate::mcap_io::input::McapInput;
+use crate::mcap_io::{TOPIC_GROUNDTRUTH_MASK, TOPIC_GROUNDTRUTH_POSE};
+use crate::metrics::segmentation::{SegmentationSummary, SegmentationTally};
+use crate::metrics::trajectory::{ate, rpe_stamped, AteStats, RpeStats};
+use crate::trajectory::{interpolate, StampedPose};
+
+/// The paper's long RPE interval: 150 frames, "drift per 5 s at 30 Hz" (algorithm.md §7.2).
+pub const LONG_RPE_DELTA_FRAMES: usize = 150;
+/// Masks waiting for their partner are dropped once the newest stamp is this far ahead: the
+/// two topics are written together, so partners are never further apart in a file.
+const MASK_MATCH_WINDOW_NS: u64 = 2_000_000_000;
+
+/// Segmentation scores.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SegmentationReport {
+    /// Estimated masks compared with a ground-truth mask of the same stamp.
+    pub matched_frames: usize,
+    /// Frames with a non-empty ground truth (the averages' frames).
+    pub frames_with_truth: usize,
+    /// Mean per-frame F1.
+    pub mean_f1: f64,
+    /// Mean per-frame precision.
+    pub mean_precision: f64,
+    /// Mean per-frame recall.
+    pub mean_recall: f64,
+    /// Frames whose ground truth is empty.
+    pub empty_truth_frames: usize,
+    /// Mean false-positive pixel fraction on those frames.
+    pub empty_truth_mean_fp_fraction: f64,
+}
+
+/// RPE for one interval.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RpeReport {
+    /// Interval in frames.
+    pub delta_frames: usize,
+    /// Pairs evaluated.
+    pub pairs: usize,
+    /// Translational RMSE, metres.
+    pub translation_rmse_m: f64,
+    /// Rotational RMSE, degrees.
+    pub rotation_rmse_deg: f64,
+}
+
+/// ATE after rigid alignment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AteReport {
+    /// Poses compared.
+    pub poses: usize,
+    /// RMSE, metres.
+    pub rmse_m: f64,
+    /// Maximum, metres.
+    pub max_m: f64,
+}
+
+/// Odometry scores.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OdometryReport {
+    /// Estimated poses.
+    pub estimated_poses: usize,
+    /// Ground-truth poses.
+    pub groundtruth_poses: usize,
+    /// RPE, Δ = 1 and the long interval.
+    pub rpe: Vec<RpeReport>,
+    /// ATE, when at least 3 estimated poses have ground truth.
+    pub ate: Option<AteReport>,
+}
+
+/// Everything `eval` measured; `None` parts had no ground truth in the file.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvalReport {
+    /// The file.
+    pub path: String,
+    /// Estimated masks in the file.
+    pub estimated_masks: usize,
+    /// Segmentation, when `/groundtruth/mask` is present.
+    pub segmentation: Option<SegmentationReport>,
+    /// Odometry, when `/groundtruth/pose` is present.
+    pub odometry: Option<OdometryReport>,
+}
+
+fn mask_from_message(input: &McapInput, channel_id: u16, data: &[u8]) -> Result<(u64, Mask)> {
+    let channel = &input.channels()[&channel_id];
+    let ct = channel.channel_type.ok_or_else(|| Error::Decode {
+        topic: channel.topic.clone(),
+        message: format!("unsupported schema {:?} for a mask", channel.schema_name),
+    })?;
+    let msg = decode_image(ct, &channel.topic, data)?;
+    let ImagePayload::Raw {
+        width,
+        height,
+        encoding,
+        step,
+        data,
+        ..
+    } = &msg.payload
+    else {
+        return Err(Error::Decode {
+            topic: channel.topic.clone(),
+            message: "expected an uncompressed mono8 mask, found a compressed image".into(),
+        });
+    };
+    if !matches!(encoding.as_str(), "mono8" | "8UC1") {
+        return Err(Error::Decode {
+            topic: channel.topic.clone(),
+            message: format!("expected a mono8 mask, found encoding {encoding:?}"),
+        });
+    }
+    let size = ImageSize::new(*width as usize, *height as usize);
+    let step = *step as usize;
+    if step < size.width || data.len() < step * size.height.saturating_sub(1) + size.width {
+        return Err(Error::Decode {
+            topic: channel.topic.clone(),
+            message: format!("mask {size} with step {step} has only {} bytes", data.len()),
+        });
+    }
+    let mask = Mask::from_fn(size, |x, y| if data[y * step + x] != 0 { MASK_SET } else { 0 });
+    Ok((msg.timestamp_ns, mask))
+}
+
+fn read_poses(input: &McapInput, topic: &str) -> Result<Vec<StampedPose>> {
+    let Some(channel) = input.channel_by_topic(topic) else {
+        return Ok(Vec::new());
+    };
+    let Some(ct) = channel.channel_type.filter(|ct| ct.is_pose()) else {
+        return Err(Error::Decode {
+            topic: topic.into(),
+            message: format!("expected a pose schema, found {:?}", channel.schema_name),
+        });
+    };
+    let mut poses = Vec::new();
+    input.for_each_message(Some(&[topic.to_owned()]), None, |m| {
+        for s in decode_poses(ct, topic, &m.data)? {
+            poses.push(StampedPose {
+                timestamp_ns: s.timestamp_ns,
+                world_from_camera: s.parent_from_child,
+            });
+        }
+        Ok(true)
+    })?;
+    poses.sort_by_key(|p| p.timestamp_ns);
+    poses.dedup_by_key(|p| p.timestamp_ns);
+    Ok(poses)
+}
+
+fn rpe_report(delta_frames: usize, s: &RpeStats) -> RpeReport {
+    RpeReport {
+        delta_frames,
+        pairs: s.pairs,
+        translation_rmse_m: s.translation_rmse_m,
+        rotation_rmse_deg: s.rotation_rmse_deg,
+    }
+}
+
+fn odometry(estimated: &[StampedPose], truth: &[StampedPose]) -> Result<OdometryReport> {
+    let mut rpe = Vec::new();
+    if estimated.len() >= 3 && truth.len() >= 2 {
+        // rpe_stamped drops pairs whose second frame is the last one (evaluate_rpe.py), so
+        // the longest usable interval is n − 2.
+        let long = LONG_RPE_DELTA_FRAMES.min(estimated.len() - 2);
+        for delta in [1, long] {
+            if rpe.iter().any(|r: &RpeReport| r.delta_frames == delta) {
+                continue;
+            }
+            rpe.push(rpe_report(delta, &rpe_stamped(estimated, truth, delta)?));
+        }
+    }
+    let mut ate_report = None;
+    if truth.len() >= 2 {
+        let mut intervals: Vec<u64> = truth
+            .windows(2)
+            .map(|w| w[1].timestamp_ns - w[0].timestamp_ns)
+            .collect();
+        intervals.sort_unstable();
+        let max_gap_ns = 2 * intervals[intervals.len() / 2];
+        let (est, gt): (Vec<_>, Vec<_>) = estimated
+            .iter()
+            .filter_map(|e| interpolate(truth, e.timestamp_ns, max_gap_ns).map(|g| (e.world_from_camera, g)))
+            .unzip();
+        if est.len() >= 3 {
+            let a: AteStats = ate(&est, &gt)?;
+            ate_report = Some(AteReport {
+                poses: a.poses,
+                rmse_m: a.rmse_m,
+                max_m: a.max_m,
+            });
+        }
+    }
+    Ok(OdometryReport {
+        estimated_poses: estimated.len(),
+        groundtruth_poses: truth.len(),
+        rpe,
+        ate: ate_report,
+    })
+}
+
+/// Evaluates one output file.
+///
+/// # Errors
+/// [`Error::Dataset`] when the file has no `/occmask/mask` or `/occmask/odometry` (not an
+/// output of `occmask process`); decode, I/O and MCAP errors.
+pub fn evaluate(path: &Path) -> Result<EvalReport> {
+    let input = McapInput::open(path)?;
+    let mask_channel = input.channel_by_topic(TOPIC_MASK).map(|c| c.id);
+    let odometry_present = input.channel_by_topic(TOPIC_ODOMETRY).is_some();
+    if mask_channel.is_none() && !odometry_present {
+        return Err(Error::Dataset {
+            path: path.to_owned(),
+            message: format!(
+                "no {TOPIC_MASK} or {TOPIC_ODOMETRY} channel: run `occmask process` on the recording first"
+            ),
+        });
+    }
+    let gt_mask_channel = input.channel_by_topic(TOPIC_GROUNDTRUTH_MASK).map(|c| c.id);
+
+    let mut estimated_masks = 0usize;
+    let mut segmentation = None;
+    if let Some(est_id) = mask_channel {
+        let mut tally = SegmentationTally::default();
+        let mut matched = 0usize;
+        let mut pending: [BTreeMap<u64, Mask>; 2] = [BTreeMap::new(), BTreeMap::new()];
+        let topics: Vec<String> = [Some(TOPIC_MASK), gt_mask_channel.map(|_| TOPIC_GROUNDTRUTH_MASK)]
+            .into_iter()
+            .flatten()
+            .map(str::to_owned)
+            .collect();
+        input.for_each_message(Some(&topics), None, |m| {
+            let id = m.header.channel_id;
+            let side = usize::from(id != est_id);
+            if side == 0 {
+                estimated_masks += 1;
+            }
+            if gt_mask_channel.is_none() {
+                return Ok(true);
+            }
+            let (stamp, mask) = mask_from_message(&input, id, &m.data)?;
+            if let Some(other) = pending[1 - side].remove(&stamp) {
+                let (est, gt) = if side == 0 {
+                    (&mask, &other)
+                } else {
+                    (&other, &mask)
+                };
+                tally.add_masks(est, gt)?;
+                matched += 1;
+            } else {
+                pending[side].insert(stamp, mask);
+            }
+            let horizon = stamp.saturating_sub(MASK_MATCH_WINDOW_NS);
+            for p in &mut pending {
+                *p = p.split_off(&horizon);
+            }
+            Ok(true)
+        })?;
+        if gt_mask_channel.is_some() {
+            let s: SegmentationSummary = tally.summary();
+            segmentation = Some(SegmentationReport {
+                matched_frames: matched,
+                frames_with_truth: s.frames_with_truth,
+                mean_f1: s.mean_f1,
+                mean_precision: s.mean_precision,
+                mean_recall: s.mean_recall,
+                empty_truth_frames: s.empty_truth_frames,
+                empty_truth_mean_fp_fraction: s.empty_truth_mean_fp_fraction,
+            });
+        }
+    }
+
+    let truth = read_poses(&input, TOPIC_GROUNDTRUTH_POSE)?;
+    let odometry = if truth.is_empty() || !odometry_present {
+        None
+    } else {
+        Some(odometry(&read_poses(&input, TOPIC_ODOMETRY)?, &truth)?)
+    };
+    Ok(EvalReport {
+        path: path.display().to_string(),
+        estimated_masks,
+        segmentation,
+        odometry,
+    })
+}
+
+/// The report as a readable table.
+pub fn format_report(report: &EvalReport) -> String {
+    let mut out = format!("{}\n", report.path);
+    out.push_str(&format!("  estimated masks        {}\n", report.estimated_masks));
+    match &report.segmentation {
+        Some(s) => {
+            out.push_str(&format!(
+                "  segmentation           {} frames matched, {} with moving objects\n",
+                s.matched_frames, s.frames_with_truth
+            ));
+            out.push_str(&format!(
+                "    F1 / precision / recall   {:.3} / {:.3} / {:.3}\n",
+                s.mean_f1, s.mean_precision, s.mean_recall
+            ));
+            if s.empty_truth_frames > 0 {
+                out.push_str(&format!(
+                    "    static frames              {} (mean false-positive fraction {:.4})\n",
+                    s.empty_truth_frames, s.empty_truth_mean_fp_fraction
+                ));
+            }
+        }
+        None => out.push_str(&format!(
+            "  segmentation           no {TOPIC_GROUNDTRUTH_MASK} in the file\n"
+        )),
+    }
+    match &report.odometry {
+        Some(o) => {
+            out.push_str(&format!(
+                "  odometry               {} estimated poses, {} ground-truth poses\n",
+                o.estimated_poses, o.groundtruth_poses
+            ));
+            for r in &o.rpe {
+                out.push_str(&format!(
+                    "    RPE Δ={:<4} ({:>5} pairs)  {:.4} m  {:.3}°\n",
+                    r.delta_frames, r.pairs, r.translation_rmse_m, r.rotation_rmse_deg
+                ));
+            }
+            match &o.ate {
+                Some(a) => out.push_str(&format!(
+                    "    ATE ({} poses)            RMSE {:.4} m, max {:.4} m\n",
+                    a.poses, a.rmse_m, a.max_m
+                )),
+                None => out.push_str("    ATE                        fewer than 3 poses with ground truth\n"),
+            }
+        }
+        None => out.push_str(&format!(
+            "  odometry               no {TOPIC_GROUNDTRUTH_POSE} in the file\n"
+        )),
+    }
+    out
+}
