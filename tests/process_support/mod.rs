@@ -67,6 +67,8 @@ pub const DEPTH_TOPIC: &str = "/camera/depth/image";
 pub const INFO_TOPIC: &str = "/camera/color/camera_info";
 pub const GT_TOPIC: &str = "/groundtruth/pose";
 pub const OTHER_TOPIC: &str = "/diagnostics";
+/// Ground-truth masks (protobuf flavour only): the moving square.
+pub const GT_MASK_TOPIC: &str = "/groundtruth/mask";
 pub const FRAME_ID: &str = "camera_color_optical_frame";
 pub const INTRINSICS: PinholeIntrinsics = PinholeIntrinsics {
     fx: 50.0,
@@ -76,10 +78,15 @@ pub const INTRINSICS: PinholeIntrinsics = PinholeIntrinsics {
 };
 pub const DEPTH_UNITS: f64 = 1000.0;
 
+/// True inside the moving square of frame `i` (12×12 px, moving right by 2 px per frame).
+pub fn square(i: usize, x: usize, y: usize) -> bool {
+    let sx = 8 + 2 * i;
+    x >= sx && x < sx + 12 && (14..26).contains(&y)
+}
+
 /// Colour of frame `i`: a gradient with a bright square moving right by 2 px per frame.
 pub fn rgb_pixel(i: usize, x: usize, y: usize) -> [u8; 3] {
-    let sx = 8 + 2 * i;
-    if x >= sx && x < sx + 12 && (14..26).contains(&y) {
+    if square(i, x, y) {
         [250, 240, 30]
     } else {
         [(3 * x) as u8, (4 * y) as u8, ((x + y) * 2) as u8]
@@ -88,10 +95,9 @@ pub fn rgb_pixel(i: usize, x: usize, y: usize) -> [u8; 3] {
 
 /// Depth of frame `i` in millimetres: 3 m wall, the square at 1.5 m, a hole column.
 pub fn depth_mm(i: usize, x: usize, y: usize) -> u16 {
-    let sx = 8 + 2 * i;
     if x == 0 {
         0
-    } else if x >= sx && x < sx + 12 && (14..26).contains(&y) {
+    } else if square(i, x, y) {
         1500
     } else {
         3000 + (y as u16) * 4
@@ -135,6 +141,7 @@ fn png_bytes(size: ImageSize, i: usize) -> Vec<u8> {
 }
 
 struct Channels {
+    gt_mask: Option<u16>,
     color: u16,
     depth: u16,
     info: u16,
@@ -214,7 +221,14 @@ fn register<W: Write + Seek>(w: &mut mcap::Writer<W>, flavor: Flavor, spec: &Fix
             (color, depth, info, gt)
         }
     };
+    let gt_mask = (flavor == Flavor::Protobuf).then(|| {
+        let s = fm::RawImage::get_schema().unwrap();
+        let sid = w.add_schema(&s.name, &s.encoding, &s.data).unwrap();
+        w.add_channel(sid, GT_MASK_TOPIC, "protobuf", &BTreeMap::new())
+            .unwrap()
+    });
     Channels {
+        gt_mask,
         color: ids.0,
         depth: ids.1,
         info: ids.2,
@@ -440,6 +454,11 @@ pub fn write_fixture<W: Write + Seek>(sink: W, flavor: Flavor, spec: &FixtureSpe
             msgs.push((tc + TRANSPORT_NS, ch.info, info_msg(flavor, spec.size, tc)));
         }
         msgs.push((tc + TRANSPORT_NS, ch.gt, pose_msg(flavor, tc, &gt_pose(i))));
+        if let Some(id) = ch.gt_mask {
+            let mask = Mask::from_fn(spec.size, |x, y| if square(i, x, y) { MASK_SET } else { 0 });
+            let msg = codec::mask_image(tc, FRAME_ID, &mask).unwrap();
+            msgs.push((tc + TRANSPORT_NS, id, msg.encode_to_vec()));
+        }
         msgs.push((
             tc + 2 * TRANSPORT_NS,
             ch.other,

@@ -1,0 +1,119 @@
+//! `eval` on outputs of `process`: F1 against the ground-truth masks, RPE/ATE against the
+//! ground-truth poses, as a library call and through the binary (table and JSON).
+
+#![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
+
+mod process_support;
+
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use occmask::evaluate::evaluate;
+use occmask::mcap_io::input::detect::TopicOverrides;
+use occmask::mcap_io::input::McapInput;
+use occmask::process::{process_file, NoHooks, PoseMode, ProcessConfig};
+use process_support::*;
+
+fn processed(dir: &Path, config: &ProcessConfig, name: &str) -> PathBuf {
+    let input_path = dir.join(format!("{name}.in.mcap"));
+    std::fs::write(
+        &input_path,
+        fixture_bytes(Flavor::Protobuf, &FixtureSpec::default()),
+    )
+    .unwrap();
+    let input = McapInput::open(&input_path).unwrap();
+    let out_path = dir.join(format!("{name}.out.mcap"));
+    let file = BufWriter::new(std::fs::File::create(&out_path).unwrap());
+    let (sink, _) = process_file(&input, file, config, &mut test_factory, &mut NoHooks).unwrap();
+    sink.into_inner().unwrap().sync_all().unwrap();
+    out_path
+}
+
+#[test]
+fn scores_match_hand_computed_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = ProcessConfig {
+        pose_mode: PoseMode::External,
+        topics: TopicOverrides {
+            pose: Some(GT_TOPIC.into()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let out = processed(dir.path(), &config, "ext");
+    let report = evaluate(&out).unwrap();
+    assert_eq!(report.estimated_masks, 12);
+    let seg = report.segmentation.unwrap();
+    assert_eq!(seg.matched_frames, 12);
+    assert_eq!(seg.frames_with_truth, 12);
+    // The test processor marks the 2-px strips the square leaves and enters: per moving frame
+    // TP = 24, FP = 24, FN = 120 → F1 = 48 / 192 = 0.25; frame 0 has an empty mask (F1 = 0).
+    assert!((seg.mean_f1 - 11.0 * 0.25 / 12.0).abs() < 1e-12, "{seg:?}");
+    // Precision 0.5 per moving frame; frame 0 predicts nothing, which the metric counts as
+    // precision 1 (no false positive).
+    assert!(
+        (seg.mean_precision - (1.0 + 11.0 * 0.5) / 12.0).abs() < 1e-12,
+        "{seg:?}"
+    );
+    assert!(
+        (seg.mean_recall - 11.0 * (24.0 / 144.0) / 12.0).abs() < 1e-12,
+        "{seg:?}"
+    );
+    // External ground-truth poses: zero error.
+    let odo = report.odometry.unwrap();
+    assert_eq!((odo.estimated_poses, odo.groundtruth_poses), (12, 12));
+    let deltas: Vec<usize> = odo.rpe.iter().map(|r| r.delta_frames).collect();
+    assert_eq!(deltas, vec![1, 10], "12 frames: the longest delta is n - 2");
+    assert_eq!(odo.rpe[0].pairs, 10);
+    for r in &odo.rpe {
+        assert!(r.translation_rmse_m < 1e-9 && r.rotation_rmse_deg < 1e-6, "{r:?}");
+    }
+    assert!(odo.ate.unwrap().rmse_m < 1e-9);
+}
+
+#[test]
+fn wrong_poses_give_nonzero_errors_and_the_cli_prints_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = processed(dir.path(), &ProcessConfig::default(), "dvo");
+    let report = evaluate(&out).unwrap();
+    let odo = report.odometry.unwrap();
+    // The test processor's fake poses step 1 m in z per frame; ground truth moves ~1 cm.
+    assert!(odo.rpe[0].translation_rmse_m > 0.9, "{:?}", odo.rpe[0]);
+
+    let bin = env!("CARGO_BIN_EXE_occmask");
+    let table = std::process::Command::new(bin)
+        .args(["eval"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        table.status.success(),
+        "{}",
+        String::from_utf8_lossy(&table.stderr)
+    );
+    let text = String::from_utf8(table.stdout).unwrap();
+    assert!(
+        text.contains("F1 / precision / recall   0.229") && text.contains("RPE Δ=1"),
+        "{text}"
+    );
+
+    let json = std::process::Command::new(bin)
+        .args(["eval", "--json"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    assert_eq!(v["segmentation"]["matched_frames"], 12);
+    assert_eq!(v["odometry"]["rpe"][1]["delta_frames"], 10);
+
+    // An input that was never processed: the error says what to run.
+    let raw = dir.path().join("raw.mcap");
+    std::fs::write(&raw, fixture_bytes(Flavor::Ros2, &FixtureSpec::default())).unwrap();
+    let failed = std::process::Command::new(bin)
+        .args(["eval"])
+        .arg(&raw)
+        .output()
+        .unwrap();
+    assert_eq!(failed.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&failed.stderr).contains("occmask process"));
+}
