@@ -9,9 +9,12 @@
 //! 5. the command-line interface (in the binary).
 #![deny(missing_docs)]
 
+pub mod convert;
+pub mod dataset;
 pub mod error;
 pub mod geometry;
 pub mod image_buf;
+pub mod mcap_io;
 pub mod metrics;
 pub mod occlusion;
 pub mod synthetic;
