@@ -9,9 +9,11 @@
 //! 5. the command-line interface (in the binary).
 #![deny(missing_docs)]
 
+pub mod dvo;
 pub mod error;
 pub mod geometry;
 pub mod image_buf;
+pub mod pyramid;
 pub mod time;
 pub mod trajectory;
 
