@@ -9,11 +9,15 @@
 //! 5. the command-line interface (in the binary).
 #![deny(missing_docs)]
 
+pub mod convert;
+pub mod dataset;
 pub mod dvo;
 pub mod error;
 pub mod geometry;
 pub mod image_buf;
+pub mod mcap_io;
 pub mod pyramid;
+pub mod synthetic;
 pub mod time;
 pub mod trajectory;
 

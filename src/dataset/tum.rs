@@ -1,0 +1,57 @@
+//! TUM RGB-D layout (also used by ICSL sequences): `rgb.txt`, `depth.txt`, optional
+//! `groundtruth.txt`, images under `rgb/` and `depth/` (algorithm.md §6.3).
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+use super::{folder_name, read_groundtruth, read_image_list, require_dir, DatasetKind, Sequence};
+
+/// Lists a TUM-layout folder. `kind` is [`DatasetKind::Tum`] or [`DatasetKind::Icsl`] (same
+/// layout, different units and camera).
+///
+/// # Errors
+/// [`Error::Dataset`] when the folder or a list file is missing or a list is empty;
+/// [`Error::Parse`] for malformed or unsorted lines and listed files that do not exist.
+pub fn load(root: &Path, kind: DatasetKind) -> Result<Sequence> {
+    require_dir(root, "a TUM RGB-D dataset")?;
+    let list = |name: &str, what: &str| {
+        let path = root.join(name);
+        if !path.is_file() {
+            return Err(Error::Dataset {
+                path: path.clone(),
+                message: format!("expected {name} listing the {what} images ('timestamp path' per line), found no such file"),
+            });
+        }
+        let images = read_image_list(&path, root)?;
+        if images.is_empty() {
+            return Err(Error::Dataset {
+                path,
+                message: format!("expected at least one {what} image, found an empty list (empty sequence)"),
+            });
+        }
+        Ok((path, images))
+    };
+    let (rgb_list, color) = list("rgb.txt", "colour")?;
+    let (depth_list, depth) = list("depth.txt", "depth")?;
+    let mut text_files = vec![rgb_list, depth_list];
+    let gt_path = root.join("groundtruth.txt");
+    let groundtruth = if gt_path.is_file() {
+        text_files.push(gt_path.clone());
+        read_groundtruth(&gt_path)?
+    } else {
+        Vec::new()
+    };
+    Ok(Sequence {
+        kind,
+        root: root.to_owned(),
+        name: folder_name(root),
+        color,
+        depth,
+        given_pairs: None,
+        masks: Vec::new(),
+        unmatched_masks: Vec::new(),
+        groundtruth,
+        text_files,
+    })
+}

@@ -1,0 +1,98 @@
+//! Reading and writing occmask's MCAP files.
+//!
+//! Every message uses a Foxglove well-known schema with protobuf encoding (the message structs
+//! and embedded descriptors of the `foxglove` crate), written through [`mcap::Writer`]
+//! (design: ecosystem.md §4). The topic and frame names below are the contract between
+//! `occmask convert`, `occmask process` and the viewer; the README's channel table lists them.
+//!
+//! - [`codec`]: sans-IO conversion between library types and Foxglove messages;
+//! - [`writer`]: [`RgbdMcapWriter`], which registers schemas and channels once and writes
+//!   messages in the order it is given (callers merge their streams by time);
+//! - [`reader`]: [`McapFileReader`] for files this crate wrote;
+//! - [`output`]: [`AtomicOutput`], the temporary-file-then-rename helper every command uses.
+
+pub mod codec;
+pub mod output;
+pub mod reader;
+pub mod writer;
+
+pub use codec::{ColorFormat, Decoded};
+pub use output::AtomicOutput;
+pub use reader::{McapFileReader, ReadMessage};
+pub use writer::{Compression, McapWriteOptions, RgbdMcapWriter};
+
+/// Colour images as the original PNG/JPEG bytes (`foxglove.CompressedImage`) or decoded `rgb8`
+/// (`foxglove.RawImage`).
+pub const TOPIC_COLOR_IMAGE: &str = "/camera/rgb/image";
+/// Calibration of the colour camera, one per colour image with the same timestamp.
+pub const TOPIC_COLOR_CAMERA_INFO: &str = "/camera/rgb/camera_info";
+/// Depth images, `foxglove.RawImage` `16UC1` in native sensor units (see [`DEPTH_UNITS_KEY`]).
+pub const TOPIC_DEPTH_IMAGE: &str = "/camera/depth/image";
+/// Calibration of the depth image, one per depth image with the same timestamp.
+pub const TOPIC_DEPTH_CAMERA_INFO: &str = "/camera/depth/camera_info";
+/// Ground-truth camera poses (`foxglove.PoseInFrame`, frame [`FRAME_WORLD`]).
+pub const TOPIC_GROUNDTRUTH_POSE: &str = "/groundtruth/pose";
+/// Transforms (`foxglove.FrameTransform`), e.g. [`FRAME_WORLD`] → [`FRAME_CAMERA_GROUNDTRUTH`].
+pub const TOPIC_TF: &str = "/tf";
+/// Ground-truth moving-object masks (`foxglove.RawImage` `mono8`, 255 = moving), LARR only.
+pub const TOPIC_GROUNDTRUTH_MASK: &str = "/groundtruth/mask";
+
+/// Optical frame of the colour camera (+x right, +y down, +z forward). TUM and LARR depth is
+/// registered to colour, so depth images use this frame too.
+pub const FRAME_CAMERA_OPTICAL: &str = "camera_rgb_optical";
+/// The ground-truth (motion-capture) world frame.
+pub const FRAME_WORLD: &str = "world";
+/// The camera as placed by the ground-truth trajectory.
+pub const FRAME_CAMERA_GROUNDTRUTH: &str = "camera_groundtruth";
+
+/// Schema name of `foxglove.CompressedImage`.
+pub const SCHEMA_COMPRESSED_IMAGE: &str = "foxglove.CompressedImage";
+/// Schema name of `foxglove.RawImage`.
+pub const SCHEMA_RAW_IMAGE: &str = "foxglove.RawImage";
+/// Schema name of `foxglove.CameraCalibration`.
+pub const SCHEMA_CAMERA_CALIBRATION: &str = "foxglove.CameraCalibration";
+/// Schema name of `foxglove.PoseInFrame`.
+pub const SCHEMA_POSE_IN_FRAME: &str = "foxglove.PoseInFrame";
+/// Schema name of `foxglove.FrameTransform`.
+pub const SCHEMA_FRAME_TRANSFORM: &str = "foxglove.FrameTransform";
+/// Message and schema encoding of every channel we write.
+pub const ENCODING_PROTOBUF: &str = "protobuf";
+
+/// Channel-metadata key on depth channels: raw depth units per metre, as decimal text
+/// (`"5000"` for TUM, `"1000"` for LARR/ICSL millimetres).
+pub const DEPTH_UNITS_KEY: &str = "depth_units_per_meter";
+
+/// `RawImage.encoding` of depth images: 16-bit unsigned little-endian, one channel.
+pub const ENCODING_16UC1: &str = "16UC1";
+/// `RawImage.encoding` of masks: 8-bit, one channel.
+pub const ENCODING_MONO8: &str = "mono8";
+/// `RawImage.encoding` of decoded colour images.
+pub const ENCODING_RGB8: &str = "rgb8";
+
+/// Name of the metadata record `occmask convert` writes (dataset, intrinsics, options).
+pub const METADATA_CONVERT: &str = "occmask.convert";
+
+/// The `library` string written into the MCAP header: fixed (no build date, no host) so the
+/// same input and options give byte-identical files.
+pub const LIBRARY: &str = concat!("occmask/", env!("CARGO_PKG_VERSION"));
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use foxglove::messages::{CameraCalibration, CompressedImage, FrameTransform, PoseInFrame, RawImage};
+    use foxglove::Encode;
+
+    fn schema_name<T: Encode>() -> String {
+        T::get_schema().map(|s| s.name).unwrap_or_default()
+    }
+
+    #[test]
+    fn schema_consts_match_the_foxglove_crate() {
+        assert_eq!(schema_name::<CompressedImage>(), SCHEMA_COMPRESSED_IMAGE);
+        assert_eq!(schema_name::<RawImage>(), SCHEMA_RAW_IMAGE);
+        assert_eq!(schema_name::<CameraCalibration>(), SCHEMA_CAMERA_CALIBRATION);
+        assert_eq!(schema_name::<PoseInFrame>(), SCHEMA_POSE_IN_FRAME);
+        assert_eq!(schema_name::<FrameTransform>(), SCHEMA_FRAME_TRANSFORM);
+        assert_eq!(RawImage::get_message_encoding(), ENCODING_PROTOBUF);
+    }
+}

@@ -1,0 +1,175 @@
+//! [`AtomicOutput`]: write to a temporary file beside the target, rename on success.
+//!
+//! A crash or error never leaves a half-written file under the final name, an existing file
+//! is only replaced with `force`, and the output may not be one of the inputs.
+
+use std::fs::{File, OpenOptions};
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+
+/// A temporary output file that becomes `final_path` on [`AtomicOutput::commit`] and is
+/// deleted when dropped uncommitted.
+#[derive(Debug)]
+pub struct AtomicOutput {
+    final_path: PathBuf,
+    temp_path: PathBuf,
+    force: bool,
+    committed: bool,
+}
+
+/// True when `a` and `b` name the same existing file or directory (after symlinks; on Unix
+/// also hard links).
+fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return ma.dev() == mb.dev() && ma.ino() == mb.ino();
+        }
+    }
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(ca), Ok(cb)) => ca == cb,
+        _ => false,
+    }
+}
+
+fn output_error(path: &Path, message: impl Into<String>) -> Error {
+    Error::InvalidParameter {
+        name: "output",
+        value: path.display().to_string(),
+        expected: message.into(),
+    }
+}
+
+impl AtomicOutput {
+    /// Creates the temporary file `<final>.<pid>.tmp` in the target's directory.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] when `final_path` is a directory, is one of `inputs`, or
+    /// exists and `force` is false; [`Error::Io`] when the temporary file cannot be created
+    /// (e.g. the directory does not exist).
+    pub fn create(final_path: &Path, force: bool, inputs: &[&Path]) -> Result<(Self, File)> {
+        if final_path.is_dir() {
+            return Err(output_error(final_path, "a file path, found a directory"));
+        }
+        for input in inputs {
+            if same_file(final_path, input) {
+                return Err(output_error(
+                    final_path,
+                    format!("a path different from the input {}", input.display()),
+                ));
+            }
+        }
+        if final_path.exists() && !force {
+            return Err(output_error(
+                final_path,
+                "a path that does not exist yet (pass --force to overwrite it)",
+            ));
+        }
+        let file_name = final_path
+            .file_name()
+            .ok_or_else(|| output_error(final_path, "a path ending in a file name"))?;
+        let mut temp_name = file_name.to_owned();
+        temp_name.push(format!(".{}.tmp", std::process::id()));
+        let temp_path = final_path.with_file_name(temp_name);
+        let file = OpenOptions::new()
+            .write(true)
+            .read(true)
+            .create_new(true)
+            .open(&temp_path)
+            .map_err(|e| Error::io("cannot create temporary output file", &temp_path, e))?;
+        Ok((
+            Self {
+                final_path: final_path.to_owned(),
+                temp_path,
+                force,
+                committed: false,
+            },
+            file,
+        ))
+    }
+
+    /// The final path.
+    pub fn path(&self) -> &Path {
+        &self.final_path
+    }
+
+    /// The temporary path being written.
+    pub fn temp_path(&self) -> &Path {
+        &self.temp_path
+    }
+
+    /// Flushes `file` to disk and renames the temporary file to the final path.
+    ///
+    /// # Errors
+    /// [`Error::Io`] when syncing or renaming fails; [`Error::InvalidParameter`] when the
+    /// target appeared meanwhile and `force` is false. The temporary file is removed.
+    pub fn commit(mut self, file: File) -> Result<()> {
+        file.sync_all()
+            .map_err(|e| Error::io("cannot flush output file", &self.temp_path, e))?;
+        drop(file);
+        if !self.force && self.final_path.exists() {
+            return Err(output_error(
+                &self.final_path,
+                "a path that does not exist yet (it appeared while writing; pass --force to overwrite it)",
+            ));
+        }
+        std::fs::rename(&self.temp_path, &self.final_path)
+            .map_err(|e| Error::io("cannot rename temporary output into place", &self.final_path, e))?;
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for AtomicOutput {
+    fn drop(&mut self) {
+        if !self.committed {
+            // Best effort: the error that made us drop is what the user needs to see.
+            let _ = std::fs::remove_file(&self.temp_path);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    #[test]
+    fn commit_renames_and_drop_removes() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("a.mcap");
+        let (o, mut f) = AtomicOutput::create(&out, false, &[]).unwrap();
+        f.write_all(b"hello").unwrap();
+        assert!(o.temp_path().exists() && !out.exists());
+        o.commit(f).unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"hello");
+
+        let (o, _f) = AtomicOutput::create(&dir.path().join("b.mcap"), false, &[]).unwrap();
+        let temp = o.temp_path().to_owned();
+        drop(o);
+        assert!(!temp.exists());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn refuses_overwrite_without_force_and_input_as_output() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("a.mcap");
+        std::fs::write(&out, b"old").unwrap();
+        let err = AtomicOutput::create(&out, false, &[]).unwrap_err().to_string();
+        assert!(err.contains("--force"), "{err}");
+        let err = AtomicOutput::create(&out, true, &[out.as_path()])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("different from the input"), "{err}");
+        let (o, f) = AtomicOutput::create(&out, true, &[]).unwrap();
+        o.commit(f).unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"");
+        let err = AtomicOutput::create(dir.path(), true, &[])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("directory"), "{err}");
+    }
+}

@@ -1,0 +1,232 @@
+//! Round trip: convert ../shared/data/tum_fr2_desk_50 with the binary, read it back with the
+//! library's reader, and compare with the source files decoded independently (the `image`
+//! crate, the text files): every colour byte, depth pixel, timestamp and pose.
+
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns: a panic is the failure report
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use common::*;
+use occmask::geometry::camera::presets;
+use occmask::image_buf::ImageSize;
+use occmask::mcap_io::codec::{
+    depth_u16_from_raw, intrinsics_from_calibration, isometry_from_parts, timestamp_ns,
+};
+use occmask::mcap_io::*;
+use occmask::time::parse_seconds_to_ns;
+use occmask::trajectory::parse_tum_line;
+
+/// `(timestamp_ns, path)` of a TUM list file, parsed independently of the library's reader.
+fn list(dir: &Path, name: &str) -> Vec<(u64, std::path::PathBuf)> {
+    std::fs::read_to_string(dir.join(name))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let (t, p) = l.split_once(' ').unwrap();
+            (parse_seconds_to_ns(t).unwrap(), dir.join(p.trim()))
+        })
+        .collect()
+}
+
+#[test]
+fn tum_fr2_desk_round_trips_exactly() {
+    let src = shared_data("tum_fr2_desk_50");
+    let tmp = tempfile::tempdir().unwrap();
+    let out_path = tmp.path().join("desk.mcap");
+    let out = occmask(&[
+        "convert".as_ref(),
+        "tum".as_ref(),
+        src.as_os_str(),
+        "-o".as_ref(),
+        out_path.as_os_str(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+
+    let rgb = list(&src, "rgb.txt");
+    let depth = list(&src, "depth.txt");
+    let gt_text = std::fs::read_to_string(src.join("groundtruth.txt")).unwrap();
+    let gt_lines: Vec<&str> = gt_text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .collect();
+    assert_eq!((rgb.len(), depth.len(), gt_lines.len()), (50, 50, 792));
+
+    let reader = McapFileReader::open(&out_path).unwrap();
+    let channels = reader.channels();
+    let topics: Vec<(&str, &str)> = channels
+        .iter()
+        .map(|c| (c.topic.as_str(), c.schema_name.as_str()))
+        .collect();
+    assert_eq!(
+        topics,
+        vec![
+            (TOPIC_COLOR_IMAGE, SCHEMA_COMPRESSED_IMAGE),
+            (TOPIC_COLOR_CAMERA_INFO, SCHEMA_CAMERA_CALIBRATION),
+            (TOPIC_DEPTH_IMAGE, SCHEMA_RAW_IMAGE),
+            (TOPIC_DEPTH_CAMERA_INFO, SCHEMA_CAMERA_CALIBRATION),
+            (TOPIC_GROUNDTRUTH_POSE, SCHEMA_POSE_IN_FRAME),
+            (TOPIC_TF, SCHEMA_FRAME_TRANSFORM),
+        ]
+    );
+    assert_eq!(
+        channels[2].metadata.get(DEPTH_UNITS_KEY).map(String::as_str),
+        Some("5000")
+    );
+
+    let mut by_topic: BTreeMap<String, Vec<ReadMessage>> = BTreeMap::new();
+    let mut last_log_time = 0;
+    for m in reader.messages().unwrap() {
+        let m = m.unwrap();
+        assert!(
+            m.log_time_ns >= last_log_time,
+            "messages must be in log-time order"
+        );
+        last_log_time = m.log_time_ns;
+        by_topic.entry(m.topic.clone()).or_default().push(m);
+    }
+
+    // Colour: the original PNG bytes, at the listed time, with one calibration each.
+    let colour = &by_topic[TOPIC_COLOR_IMAGE];
+    assert_eq!(colour.len(), rgb.len());
+    for (m, (t, path)) in colour.iter().zip(&rgb) {
+        let Decoded::CompressedImage(img) = &m.message else {
+            panic!("colour must be CompressedImage")
+        };
+        assert_eq!(m.log_time_ns, *t);
+        assert_eq!(timestamp_ns(img.timestamp.as_ref()), *t);
+        assert_eq!(img.format, "png");
+        assert_eq!(img.frame_id, FRAME_CAMERA_OPTICAL);
+        assert!(
+            img.data.as_ref() == std::fs::read(path).unwrap().as_slice(),
+            "{}",
+            path.display()
+        );
+    }
+    for (topic, stamps) in [(TOPIC_COLOR_CAMERA_INFO, &rgb), (TOPIC_DEPTH_CAMERA_INFO, &depth)] {
+        let infos = &by_topic[topic];
+        assert_eq!(infos.len(), stamps.len());
+        for (m, (t, _)) in infos.iter().zip(stamps) {
+            let Decoded::CameraCalibration(cal) = &m.message else {
+                panic!("{topic} must be CameraCalibration")
+            };
+            assert_eq!(m.log_time_ns, *t);
+            assert_eq!(timestamp_ns(cal.timestamp.as_ref()), *t);
+            assert_eq!(
+                intrinsics_from_calibration(cal, topic).unwrap(),
+                (presets::TUM_FR2, ImageSize::new(640, 480))
+            );
+        }
+    }
+
+    // Depth: every pixel equal to the PNG decoded by the `image` crate.
+    let depth_msgs = &by_topic[TOPIC_DEPTH_IMAGE];
+    assert_eq!(depth_msgs.len(), depth.len());
+    for (m, (t, path)) in depth_msgs.iter().zip(&depth) {
+        let Decoded::RawImage(raw) = &m.message else {
+            panic!("depth must be RawImage")
+        };
+        assert_eq!(m.log_time_ns, *t);
+        assert_eq!(raw.encoding, "16UC1");
+        let (size, pixels) = depth_u16_from_raw(raw, TOPIC_DEPTH_IMAGE).unwrap();
+        let expected = image::open(path).unwrap().into_luma16();
+        assert_eq!(
+            size,
+            ImageSize::new(expected.width() as usize, expected.height() as usize)
+        );
+        assert!(
+            pixels == expected.into_raw(),
+            "depth pixels differ: {}",
+            path.display()
+        );
+    }
+
+    // Ground truth: every sample at its own time; positions bit-identical to the text,
+    // orientation equal to the text's quaternion normalised (the file rounds to 4 decimals).
+    for topic in [TOPIC_GROUNDTRUTH_POSE, TOPIC_TF] {
+        let msgs = &by_topic[topic];
+        assert_eq!(msgs.len(), gt_lines.len());
+        for (m, line) in msgs.iter().zip(&gt_lines) {
+            let fields: Vec<f64> = line
+                .split_whitespace()
+                .skip(1)
+                .map(|f| f.parse().unwrap())
+                .collect();
+            let expected = parse_tum_line(line).unwrap();
+            // Raw protobuf fields, compared bit for bit.
+            let (stamp, position, orientation) = match &m.message {
+                Decoded::PoseInFrame(p) => {
+                    assert_eq!(p.frame_id, FRAME_WORLD);
+                    let pose = p.pose.as_ref().unwrap();
+                    (
+                        timestamp_ns(p.timestamp.as_ref()),
+                        pose.position.unwrap(),
+                        pose.orientation.unwrap(),
+                    )
+                }
+                Decoded::FrameTransform(tf) => {
+                    assert_eq!(
+                        (tf.parent_frame_id.as_str(), tf.child_frame_id.as_str()),
+                        (FRAME_WORLD, FRAME_CAMERA_GROUNDTRUTH)
+                    );
+                    (
+                        timestamp_ns(tf.timestamp.as_ref()),
+                        tf.translation.unwrap(),
+                        tf.rotation.unwrap(),
+                    )
+                }
+                other => panic!("unexpected {other:?}"),
+            };
+            assert_eq!(
+                (m.log_time_ns, stamp),
+                (expected.timestamp_ns, expected.timestamp_ns)
+            );
+            assert_eq!(
+                [position.x, position.y, position.z],
+                [fields[0], fields[1], fields[2]]
+            );
+            let e = expected.world_from_camera.rotation;
+            let q = [orientation.x, orientation.y, orientation.z, orientation.w];
+            assert_eq!(q, [e.i, e.j, e.k, e.w]);
+            let iso = isometry_from_parts(Some(&position), Some(&orientation), topic).unwrap();
+            assert!(
+                (iso.to_homogeneous() - expected.world_from_camera.to_homogeneous())
+                    .abs()
+                    .max()
+                    < 1e-12
+            );
+            // ...and within the file's rounding of the raw quaternion.
+            for (got, raw) in q.iter().zip(&fields[3..7]) {
+                assert!((got - raw).abs() < 2e-4, "{got} vs {raw}");
+            }
+        }
+    }
+
+    // Metadata and attachments.
+    let metadata = reader.metadata().unwrap();
+    assert_eq!(metadata.len(), 1);
+    let md = &metadata[0].metadata;
+    assert_eq!(metadata[0].name, METADATA_CONVERT);
+    assert_eq!(md["dataset_kind"], "tum");
+    assert_eq!(md["sequence_name"], "tum_fr2_desk_50");
+    assert_eq!(md["intrinsics_source"], "folder name (fr2)");
+    assert_eq!(md["pairs"], "50");
+    assert!(md["command_line"].contains("convert tum"));
+    let attachments = reader.attachments().unwrap();
+    let names: Vec<&str> = attachments.iter().map(|a| a.name.as_str()).collect();
+    assert_eq!(
+        names,
+        vec![
+            "occmask_association.txt",
+            "rgb.txt",
+            "depth.txt",
+            "groundtruth.txt"
+        ]
+    );
+    assert_eq!(attachments[3].data, gt_text.as_bytes());
+    assert_eq!(attachments[0].data.iter().filter(|&&b| b == b'\n').count(), 51);
+}
