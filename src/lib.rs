@@ -11,12 +11,15 @@
 
 pub mod convert;
 pub mod dataset;
+pub mod dvo;
 pub mod error;
 pub mod geometry;
 pub mod image_buf;
 pub mod mcap_io;
 pub mod metrics;
 pub mod occlusion;
+pub mod pipeline;
+pub mod pyramid;
 pub mod synthetic;
 pub mod time;
 pub mod trajectory;
