@@ -12,6 +12,7 @@
 pub mod contour;
 pub mod convert;
 pub mod dataset;
+pub mod dvo;
 pub mod error;
 pub mod evaluate;
 pub mod geometry;
@@ -19,6 +20,8 @@ pub mod image_buf;
 pub mod mcap_io;
 pub mod metrics;
 pub mod occlusion;
+pub mod pipeline;
+pub mod pyramid;
 pub mod process;
 pub mod synthetic;
 pub mod time;

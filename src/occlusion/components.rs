@@ -23,6 +23,7 @@ const NEIGHBOURS_8: [(isize, isize); 8] = [
 /// Counts of one labelling/prediction pass.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct LabelStats {
+    pub thin_pixels_erased: usize,
     pub components: usize,
     pub small_components_erased: usize,
     pub predicted_pixels: usize,
@@ -47,6 +48,9 @@ pub(super) struct Components {
     frontier: Vec<u32>,
     candidates: Vec<u32>,
     updates: Vec<(u32, f32)>,
+    /// Morphology scratch (0 / 1 per pixel).
+    morph_a: Vec<u8>,
+    morph_b: Vec<u8>,
 }
 
 /// Neighbour (x + dx, y + dy) if inside the image.
@@ -84,6 +88,8 @@ impl Components {
             frontier: Vec::with_capacity(n),
             candidates: Vec::with_capacity(n),
             updates: Vec::with_capacity(n),
+            morph_a: vec![0; n],
+            morph_b: vec![0; n],
         }
     }
 
@@ -134,6 +140,9 @@ impl Components {
                 0
             };
         }
+        if config.thin_structure_radius_px > 0 {
+            stats.thin_pixels_erased = self.erase_thin_structures(config.thin_structure_radius_px, accumulation_m);
+        }
         if config.predict_newly_discovered {
             self.target.copy_from_slice(newly_discovered.as_slice());
         }
@@ -156,6 +165,28 @@ impl Components {
             }
         }
         stats
+    }
+
+    /// Opening of the object set (labels ≠ 0) with a (2r+1)² square: erases from A and from the
+    /// object set every pixel not covered by the opening. Returns the pixels erased.
+    fn erase_thin_structures(&mut self, radius: usize, accumulation_m: &mut DepthMeters) -> usize {
+        let (width, height) = (self.width, self.height);
+        for (m, &l) in self.morph_a.iter_mut().zip(&self.labels) {
+            *m = u8::from(l != 0);
+        }
+        // Erosion (separable min; outside the image counts as background), then dilation.
+        square_filter(&mut self.morph_a, &mut self.morph_b, width, height, radius, true);
+        square_filter(&mut self.morph_a, &mut self.morph_b, width, height, radius, false);
+        let mut erased = 0;
+        let a = accumulation_m.as_mut_slice();
+        for ((label, &opened), value) in self.labels.iter_mut().zip(&self.morph_a).zip(a.iter_mut()) {
+            if *label != 0 && opened == 0 {
+                *label = 0;
+                *value = 0.0;
+                erased += 1;
+            }
+        }
+        erased
     }
 
     /// Breadth-first ring growth of the current component (`self.component`) into the shared
@@ -274,5 +305,37 @@ impl Components {
             }
         }
         pruned
+    }
+}
+
+/// Separable square min (`erode`) or max filter of radius `r` over the 0/1 image `image`, in place
+/// (`scratch` holds the row pass); pixels outside the image count as 0.
+fn square_filter(image: &mut [u8], scratch: &mut [u8], width: usize, height: usize, r: usize, erode: bool) {
+    let combine = |a: u8, b: u8| if erode { a.min(b) } else { a.max(b) };
+    let start = u8::from(erode);
+    let sample = |values: &[u8], i: isize, n: usize, stride: usize, offset: usize| -> u8 {
+        if i < 0 || i >= n as isize {
+            0
+        } else {
+            values[offset + i as usize * stride]
+        }
+    };
+    for y in 0..height {
+        for x in 0..width {
+            let mut v = start;
+            for d in -(r as isize)..=r as isize {
+                v = combine(v, sample(image, x as isize + d, width, 1, y * width));
+            }
+            scratch[y * width + x] = v;
+        }
+    }
+    for y in 0..height {
+        for x in 0..width {
+            let mut v = start;
+            for d in -(r as isize)..=r as isize {
+                v = combine(v, sample(scratch, y as isize + d, height, width, x));
+            }
+            image[y * width + x] = v;
+        }
     }
 }

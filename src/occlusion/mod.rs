@@ -47,6 +47,20 @@ pub enum ThresholdForm {
     Quadratic,
 }
 
+/// Which depth back-projects a current pixel for the warp, and what ΔZ compares
+/// (algorithm.md §9-Q3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum WarpDepth {
+    /// The release: back-project pixel u with the previous compensated depth Zc_i(u) and compare
+    /// raw depths, ΔZ = Zc_i(n(u)) − Zc_{i+1}(u).
+    #[default]
+    PreviousCompensated,
+    /// A true backward warp where the current depth is measured: back-project with Z_{i+1}(u),
+    /// and compare with the warped point's depth z′ in the previous camera,
+    /// ΔZ = Zc_i(n(u)) − z′; unmeasured pixels fall back to the release rule.
+    Current,
+}
+
 /// Adjacency used by the pruning test of predicted areas (algorithm.md §5.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Adjacency {
@@ -76,6 +90,13 @@ pub struct OcclusionConfig {
     pub predict_newly_discovered: bool,
     /// Adjacency of the pruning test.
     pub prune_adjacency: Adjacency,
+    /// Warp depth and ΔZ comparison.
+    pub warp_depth: WarpDepth,
+    /// Radius r (px) of a square (2r+1)² morphological opening of {A > τ_α} before labelling:
+    /// object structures thinner than 2r+1 px are erased from A like small components. 0 = off
+    /// (the release). Not in the paper: it removes the 1–3 px strips that flickering Kinect depth
+    /// edges leave along long edges of static scenes (see the README's detector section).
+    pub thin_structure_radius_px: usize,
 }
 
 impl Default for OcclusionConfig {
@@ -89,6 +110,8 @@ impl Default for OcclusionConfig {
             prediction_stop_terms: 10,
             predict_newly_discovered: true,
             prune_adjacency: Adjacency::Four,
+            warp_depth: WarpDepth::PreviousCompensated,
+            thin_structure_radius_px: 1,
         }
     }
 }
@@ -141,6 +164,8 @@ pub struct OcclusionStats {
     pub warped_pixels: usize,
     /// Newly discovered pixels (Ñ).
     pub newly_discovered_pixels: usize,
+    /// Object pixels erased by the thin-structure opening.
+    pub thin_pixels_erased: usize,
     /// Object components before size suppression.
     pub components: usize,
     /// Components erased for being smaller than the object threshold.
@@ -358,6 +383,7 @@ impl OcclusionDetector {
             &mut self.accumulation_m,
         );
         self.stats.components = label_stats.components;
+        self.stats.thin_pixels_erased = label_stats.thin_pixels_erased;
         self.stats.small_components_erased = label_stats.small_components_erased;
         self.stats.predicted_pixels = label_stats.predicted_pixels;
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;

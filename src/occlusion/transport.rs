@@ -8,7 +8,7 @@
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
-use super::OcclusionConfig;
+use super::{OcclusionConfig, WarpDepth};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, Image};
 
@@ -72,9 +72,15 @@ struct PixelOut {
     warped: bool,
 }
 
-/// Steps 3–9 for one pixel given its nearest warped source index (if valid).
+/// Steps 3–9 for one pixel given its nearest warped source index (if valid) and, in
+/// [`WarpDepth::Current`] mode, the depth z′ of the warped point in the previous camera.
 #[inline]
-fn finish_pixel(inputs: &TransportInputs<'_>, measured_m: f32, source: Option<usize>) -> PixelOut {
+fn finish_pixel(
+    inputs: &TransportInputs<'_>,
+    measured_m: f32,
+    source: Option<usize>,
+    warped_depth_m: Option<f32>,
+) -> PixelOut {
     let config = inputs.config;
     let (sampled_m, accumulation_carried, predicted_carried) = match source {
         Some(n) => (
@@ -85,8 +91,9 @@ fn finish_pixel(inputs: &TransportInputs<'_>, measured_m: f32, source: Option<us
         None => (0.0, 0.0, 0),
     };
     let compensated_m = if measured_m > 0.0 { measured_m } else { sampled_m };
+    let compared_m = warped_depth_m.unwrap_or(compensated_m);
     let delta_z_m = if source.is_some() {
-        sampled_m - compensated_m
+        sampled_m - compared_m
     } else {
         0.0
     };
@@ -119,6 +126,7 @@ pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) ->
         .into_inner();
     let translation = inputs.previous_from_current.translation.vector;
     let k = inputs.intrinsics;
+    let geometric = inputs.config.warp_depth == WarpDepth::Current;
     let chunk = ROWS_PER_TASK * width;
     outputs
         .compensated_m
@@ -147,23 +155,28 @@ pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) ->
                 let previous_row = inputs.compensated_previous_m.row(y);
                 let measured_row = inputs.depth_m.row(y);
                 for x in 0..width {
-                    let z_previous = previous_row[x] as f64;
+                    let measured = measured_row[x];
+                    let use_current = geometric && measured > 0.0;
+                    let z_back_projected = if use_current { measured } else { previous_row[x] } as f64;
                     let mut source = None;
-                    if z_previous > 0.0 {
+                    let mut warped_depth = None;
+                    if z_back_projected > 0.0 {
+                        let z = z_back_projected;
                         let ray_x = inputs.ray_x[x];
-                        let qx = z_previous * (column0.x * ray_x + row_term.x) + translation.x;
-                        let qy = z_previous * (column0.y * ray_x + row_term.y) + translation.y;
-                        let qz = z_previous * (column0.z * ray_x + row_term.z) + translation.z;
+                        let qx = z * (column0.x * ray_x + row_term.x) + translation.x;
+                        let qy = z * (column0.y * ray_x + row_term.y) + translation.y;
+                        let qz = z * (column0.z * ray_x + row_term.z) + translation.z;
                         if qz > 0.0 {
                             let u = k.fx * qx / qz + k.cx;
                             let v = k.fy * qy / qz + k.cy;
                             if (0.0..=max_x).contains(&u) && (0.0..=max_y).contains(&v) {
                                 // Nearest pixel: both coordinates are ≥ 0, so +0.5 and truncation round.
                                 source = Some((v + 0.5) as usize * width + (u + 0.5) as usize);
+                                warped_depth = use_current.then_some(qz as f32);
                             }
                         }
                     }
-                    let out = finish_pixel(inputs, measured_row[x], source);
+                    let out = finish_pixel(inputs, measured, source, warped_depth);
                     zc_row[x] = out.compensated_m;
                     a_row[x] = out.accumulation_m;
                     p_row[x] = out.predicted_carried;
@@ -188,9 +201,13 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<
     let (width, height) = (size.width, size.height);
     // Step 2: warp field.
     let mut warp: Vec<Option<usize>> = vec![None; size.area()];
+    let mut warped_depth: Vec<Option<f32>> = vec![None; size.area()];
+    let geometric = inputs.config.warp_depth == WarpDepth::Current;
     for y in 0..height {
         for x in 0..width {
-            let z = inputs.compensated_previous_m.get(x, y);
+            let measured = inputs.depth_m.get(x, y);
+            let use_current = geometric && measured > 0.0;
+            let z = if use_current { measured } else { inputs.compensated_previous_m.get(x, y) };
             if z <= 0.0 {
                 continue;
             }
@@ -203,6 +220,7 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<
                     && pixel.y <= (height - 1) as f64
                 {
                     warp[y * width + x] = Some(pixel.y.round() as usize * width + pixel.x.round() as usize);
+                    warped_depth[y * width + x] = use_current.then_some(point_in_previous.z as f32);
                 }
             }
         }

@@ -1,0 +1,830 @@
+//! Robust dense visual odometry (DVO) between consecutive RGB-D frames that ignores masked
+//! (moving) pixels of the reference frame: the "Robust DVO" of Kim, Kim & Kim (ICRA 2020)
+//! built as algorithm.md §4.5 recommends.
+//!
+//! - Cost: Σ ρ_{k_I}(r_I) + γ·Σ ρ_{k_Z}(r_Z) over reference pixels with valid depth that are not
+//!   ignored; r_I photometric, r_Z = Z_cur(w) − z′ against the transformed depth; ρ bi-square
+//!   (paper Eq. 11–13). See [`residuals`] for the residuals and Jacobians.
+//! - Solver: IRLS inside a true Levenberg–Marquardt with accept/revert on the robust cost,
+//!   coarse to fine over an image pyramid ([`crate::pyramid`]), see [`solver`].
+//! - Motion convention (crate-wide, [`crate::geometry`]): the estimate is
+//!   `current_from_reference`, mapping reference-camera points into the current camera;
+//!   chain it into poses with [`crate::trajectory::chain`].
+//!
+//! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and
+//! allocates nothing per frame), or [`DvoEstimator`] on two explicitly built pyramids.
+
+pub mod mask;
+pub mod residuals;
+pub mod solver;
+pub mod weights;
+
+use nalgebra::Isometry3;
+
+use crate::error::{Error, Result};
+use crate::geometry::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
+use crate::pyramid::{level_size, ImagePyramid};
+use residuals::{CostParams, ReferencePoint, TargetView};
+use solver::{LevelError, LevelStop, LmSchedule};
+
+/// Most pyramid levels a [`DvoConfig`] may ask for (sizes the per-level arrays of
+/// [`DvoEstimate`]; 640×480 has 7 levels of at least 8×8 pixels).
+pub const MAX_DVO_LEVELS: usize = 8;
+
+/// The bi-square threshold k_I of the photometric residual (gray in [0, 1]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum IntensityThreshold {
+    /// The same k_I on every level (paper: 48/255).
+    Constant(f32),
+    /// The Matlab release's schedule k_I(lvl) = (64 − 48·e^{lvl−4})/255 with lvl = level + 1
+    /// (lvl 1 = full resolution): 61.6/255 at full resolution down to 16/255 at level 3.
+    ReleaseSchedule,
+}
+
+impl IntensityThreshold {
+    /// k_I on pyramid level `level` (0 = full resolution).
+    pub fn at_level(&self, level: usize) -> f32 {
+        match *self {
+            Self::Constant(k) => k,
+            Self::ReleaseSchedule => (64.0 - 48.0 * ((level as f32 + 1.0) - 4.0).exp()) / 255.0,
+        }
+    }
+}
+
+/// DVO parameters. Start from [`DvoConfig::paper`] (the default) or [`DvoConfig::release`]
+/// and override fields; [`DvoConfig::validate`] checks them (the tracker calls it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DvoConfig {
+    /// Pyramid levels (level 0 = input resolution, each next one half the size).
+    pub levels: usize,
+    /// The finest level the solver runs on (0 = full resolution). Default 1 (320×240 for VGA):
+    /// see the README's DVO performance section for what level 0 costs and buys.
+    pub finest_level: usize,
+    /// LM candidate evaluations per level at most.
+    pub max_iterations_per_level: usize,
+    /// LM damping λ at the start of each level (relative to diag H).
+    pub lm_lambda_initial: f64,
+    /// λ multiplier after a rejected step.
+    pub lm_lambda_up: f64,
+    /// λ divisor after an accepted step.
+    pub lm_lambda_down: f64,
+    /// A level ends when λ exceeds this.
+    pub lm_lambda_max: f64,
+    /// A level ends after a step whose largest twist component is below this (metres for
+    /// translation, radians for rotation).
+    pub step_tolerance: f64,
+    /// Bi-square threshold of the photometric residual (gray units, [0, 1]).
+    pub k_intensity: IntensityThreshold,
+    /// Bi-square threshold of the depth residual, metres.
+    pub k_depth_m: f32,
+    /// Weight γ of the depth term in the cost (dimensionless).
+    pub depth_weight_gamma: f32,
+    /// Reference pixels that must project into the current frame with a non-zero robust
+    /// weight at the finest level (scaled by 1/4 per coarser level) for a `Converged` result.
+    pub min_usable_pixels: usize,
+    /// The ignore mask is dilated by at least this many full-resolution pixels (square).
+    pub ignore_dilation_radius_px: usize,
+    /// Start from the previous converged motion instead of identity when the caller gives no
+    /// initial guess (constant-velocity prior).
+    pub init_from_previous_motion: bool,
+    /// Reference depths below this are not used, metres.
+    pub min_depth_m: f32,
+    /// Reference depths above this are not used, metres (∞ = no limit).
+    pub max_depth_m: f32,
+}
+
+impl Default for DvoConfig {
+    fn default() -> Self {
+        Self::paper()
+    }
+}
+
+impl DvoConfig {
+    /// The paper's weights (k_I 48/255, k_Z 0.5 m, γ 0.001) with the release's LM schedule
+    /// (λ 0.1, ×3, ÷1.5, stop > 200, ≤ 40 iterations, 4 levels), algorithm.md §2 / §9 Q6–Q8.
+    pub fn paper() -> Self {
+        Self {
+            levels: 4,
+            finest_level: 1,
+            max_iterations_per_level: 40,
+            lm_lambda_initial: 0.1,
+            lm_lambda_up: 3.0,
+            lm_lambda_down: 1.5,
+            lm_lambda_max: 200.0,
+            step_tolerance: 1e-5,
+            k_intensity: IntensityThreshold::Constant(48.0 / 255.0),
+            k_depth_m: 0.5,
+            depth_weight_gamma: 0.001,
+            min_usable_pixels: 1000,
+            ignore_dilation_radius_px: 4,
+            init_from_previous_motion: false,
+            min_depth_m: 0.0,
+            max_depth_m: f32::INFINITY,
+        }
+    }
+
+    /// The Matlab release's weights: k_I level schedule, k_Z 0.25 m, γ 0.01 (algorithm.md §2).
+    pub fn release() -> Self {
+        Self {
+            k_intensity: IntensityThreshold::ReleaseSchedule,
+            k_depth_m: 0.25,
+            depth_weight_gamma: 0.01,
+            ..Self::paper()
+        }
+    }
+
+    /// Checks every parameter.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the first bad field.
+    // `!(a > b)` is deliberate: a NaN parameter must be rejected.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    pub fn validate(&self) -> Result<()> {
+        fn bad(name: &'static str, value: impl ToString, expected: &str) -> Result<()> {
+            Err(Error::InvalidParameter {
+                name,
+                value: value.to_string(),
+                expected: expected.into(),
+            })
+        }
+        if self.levels == 0 || self.levels > MAX_DVO_LEVELS {
+            return bad("levels", self.levels, "1..=8");
+        }
+        if self.finest_level >= self.levels {
+            return bad("finest_level", self.finest_level, "below `levels`");
+        }
+        if self.max_iterations_per_level == 0 {
+            return bad("max_iterations_per_level", 0, "at least 1");
+        }
+        if !(self.lm_lambda_initial.is_finite() && self.lm_lambda_initial >= 0.0) {
+            return bad("lm_lambda_initial", self.lm_lambda_initial, "finite and >= 0");
+        }
+        if !(self.lm_lambda_up.is_finite() && self.lm_lambda_up > 1.0) {
+            return bad("lm_lambda_up", self.lm_lambda_up, "finite and > 1");
+        }
+        if !(self.lm_lambda_down.is_finite() && self.lm_lambda_down > 1.0) {
+            return bad("lm_lambda_down", self.lm_lambda_down, "finite and > 1");
+        }
+        if !(self.lm_lambda_max.is_finite() && self.lm_lambda_max > self.lm_lambda_initial) {
+            return bad(
+                "lm_lambda_max",
+                self.lm_lambda_max,
+                "finite and > lm_lambda_initial",
+            );
+        }
+        if !(self.step_tolerance.is_finite() && self.step_tolerance >= 0.0) {
+            return bad(
+                "step_tolerance",
+                self.step_tolerance,
+                "finite and >= 0 (metres / radians)",
+            );
+        }
+        for l in self.finest_level..self.levels {
+            let k = self.k_intensity.at_level(l);
+            if !(k.is_finite() && k > 0.0) {
+                return bad("k_intensity", k, "finite and > 0 on every level (gray units)");
+            }
+        }
+        if !(self.k_depth_m.is_finite() && self.k_depth_m > 0.0) {
+            return bad("k_depth_m", self.k_depth_m, "finite and > 0 (metres)");
+        }
+        if !(self.depth_weight_gamma.is_finite() && self.depth_weight_gamma >= 0.0) {
+            return bad("depth_weight_gamma", self.depth_weight_gamma, "finite and >= 0");
+        }
+        if self.min_usable_pixels < 6 {
+            return bad(
+                "min_usable_pixels",
+                self.min_usable_pixels,
+                "at least 6 (six unknowns)",
+            );
+        }
+        if !(self.min_depth_m.is_finite() && self.min_depth_m >= 0.0) {
+            return bad("min_depth_m", self.min_depth_m, "finite and >= 0 (metres)");
+        }
+        if !(self.max_depth_m > self.min_depth_m) {
+            return bad(
+                "max_depth_m",
+                self.max_depth_m,
+                "> min_depth_m (metres; may be infinite)",
+            );
+        }
+        Ok(())
+    }
+
+    fn schedule(&self) -> LmSchedule {
+        LmSchedule {
+            lambda_initial: self.lm_lambda_initial,
+            lambda_up: self.lm_lambda_up,
+            lambda_down: self.lm_lambda_down,
+            lambda_max: self.lm_lambda_max,
+            max_iterations: self.max_iterations_per_level,
+            step_tolerance: self.step_tolerance,
+        }
+    }
+
+    fn cost_at_level(&self, level: usize) -> CostParams {
+        CostParams {
+            k_intensity: self.k_intensity.at_level(level),
+            k_depth_m: self.k_depth_m,
+            depth_weight: self.depth_weight_gamma,
+        }
+    }
+
+    /// Usable pixels required on `level`.
+    fn required_pixels(&self, level: usize) -> usize {
+        (self.min_usable_pixels >> (2 * (level - self.finest_level))).max(6)
+    }
+}
+
+/// Why an estimate failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DvoFailure {
+    /// Too few reference pixels were usable on the finest level (no depth, everything
+    /// masked, out of view, or all residuals beyond the robust thresholds).
+    TooFewPixels {
+        /// Usable pixels found.
+        found: usize,
+        /// Pixels required ([`DvoConfig::min_usable_pixels`]).
+        required: usize,
+    },
+    /// Some motion direction is unconstrained (textureless or planar scene) on `level`.
+    Degenerate {
+        /// The pyramid level.
+        level: usize,
+    },
+    /// A step or the cost became non-finite on `level`.
+    NonFinite {
+        /// The pyramid level.
+        level: usize,
+    },
+}
+
+/// Outcome of an estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DvoStatus {
+    /// A usable motion estimate.
+    Converged,
+    /// No usable estimate: [`DvoEstimate::current_from_reference`] is the initial guess.
+    Failed(DvoFailure),
+}
+
+/// The motion between a reference and a current frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DvoEstimate {
+    /// Maps reference-camera points into the current camera (finite even on failure: then it
+    /// is the initial guess).
+    pub current_from_reference: Isometry3<f64>,
+    /// Whether the estimate is usable.
+    pub status: DvoStatus,
+    /// LM candidate evaluations on each pyramid level (index = level, 0 = full resolution;
+    /// 0 for levels not run).
+    pub iterations_per_level: [u32; MAX_DVO_LEVELS],
+    /// Why each level ended (`None` = not run or skipped for too few pixels).
+    pub stop_per_level: [Option<LevelStop>; MAX_DVO_LEVELS],
+    /// Robust cost per reference point at the final pose on the finest level.
+    pub final_cost: f64,
+    /// Reference points with a non-zero robust weight at the final pose on the finest level.
+    pub pixels_used: usize,
+    /// Reference points (valid depth, not ignored) on the finest level.
+    pub reference_pixels: usize,
+}
+
+impl DvoEstimate {
+    /// True for [`DvoStatus::Converged`].
+    pub fn is_converged(&self) -> bool {
+        self.status == DvoStatus::Converged
+    }
+
+    /// Total LM iterations over all levels.
+    pub fn total_iterations(&self) -> u32 {
+        self.iterations_per_level.iter().sum()
+    }
+}
+
+/// Preallocated scratch for estimating the motion between two [`ImagePyramid`]s: reference
+/// point lists and ignore masks per level.
+#[derive(Debug, Clone)]
+pub struct DvoEstimator {
+    config: DvoConfig,
+    size: ImageSize,
+    /// Reference points per level (empty below the finest level).
+    points: Vec<Vec<ReferencePoint>>,
+    /// Ignore mask per level, 0/1 (level 0 only allocated when it is used).
+    ignore: Vec<Vec<u8>>,
+    column_scratch: Vec<u32>,
+}
+
+impl DvoEstimator {
+    /// Allocates scratch for images of `size`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for an invalid config or a size too small for its levels.
+    pub fn new(size: ImageSize, config: DvoConfig) -> Result<Self> {
+        config.validate()?;
+        let coarsest = level_size(size, config.levels - 1);
+        if coarsest.width < crate::pyramid::MIN_LEVEL_SIDE_PX
+            || coarsest.height < crate::pyramid::MIN_LEVEL_SIDE_PX
+        {
+            return Err(Error::InvalidParameter {
+                name: "levels",
+                value: config.levels.to_string(),
+                expected: format!("few enough levels for {size} (the coarsest would be {coarsest})"),
+            });
+        }
+        let points = (0..config.levels)
+            .map(|l| {
+                if l >= config.finest_level {
+                    Vec::with_capacity(level_size(size, l).area())
+                } else {
+                    Vec::new()
+                }
+            })
+            .collect();
+        let ignore = (0..config.levels)
+            .map(|l| {
+                if l == 0 && config.finest_level > 0 {
+                    Vec::new()
+                } else {
+                    vec![0u8; level_size(size, l).area()]
+                }
+            })
+            .collect();
+        Ok(Self {
+            config,
+            size,
+            points,
+            ignore,
+            column_scratch: Vec::with_capacity(size.width),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DvoConfig {
+        &self.config
+    }
+
+    /// Reference points of `level` prepared by the last [`Self::prepare_reference`].
+    pub fn reference_points(&self, level: usize) -> &[ReferencePoint] {
+        self.points.get(level).map_or(&[], |p| p.as_slice())
+    }
+
+    /// Builds the per-level ignore masks and reference point lists of `reference`.
+    ///
+    /// The ignore mask (nonzero = ignore, reference pixel grid) is OR-pooled to the finest
+    /// level, dilated there by ⌈radius / 2^finest⌉ pixels (≥ `ignore_dilation_radius_px` at
+    /// full resolution), and OR-pooled to coarser levels. Pixels with invalid depth or depth
+    /// outside [min_depth_m, max_depth_m] are excluded as well.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when the pyramid or mask size differs from the estimator's, or
+    /// [`Error::InvalidParameter`] when the pyramid lacks a level the config uses.
+    pub fn prepare_reference(
+        &mut self,
+        reference: &ImagePyramid,
+        ignore_in_reference: Option<&Mask>,
+    ) -> Result<()> {
+        self.check_pyramid("reference pyramid", reference)?;
+        let cfg = self.config;
+        let finest = cfg.finest_level;
+        let have_mask = match ignore_in_reference {
+            Some(m) => {
+                if m.size() != self.size {
+                    return Err(Error::SizeMismatch {
+                        what: "ignore mask vs frame".into(),
+                        expected: self.size,
+                        found: m.size(),
+                    });
+                }
+                // Pool the full-resolution mask down to the finest level.
+                let mut src_size = self.size;
+                if finest == 0 {
+                    for (d, &s) in self.ignore[0].iter_mut().zip(m.as_slice()) {
+                        *d = u8::from(s != 0);
+                    }
+                } else {
+                    for l in 1..=finest {
+                        let dst_size = level_size(self.size, l);
+                        let (before, after) = self.ignore.split_at_mut(l);
+                        let src: &[u8] = if l == 1 { m.as_slice() } else { &before[l - 1] };
+                        // Raw masks use 255; pooling only tests nonzero and writes 0/1.
+                        mask::pool_or_into(src, src_size, &mut after[0], dst_size);
+                        src_size = dst_size;
+                    }
+                }
+                let radius = cfg.ignore_dilation_radius_px.div_ceil(1 << finest);
+                mask::dilate_square(
+                    &mut self.ignore[finest],
+                    level_size(self.size, finest),
+                    radius,
+                    &mut self.column_scratch,
+                );
+                for l in finest + 1..cfg.levels {
+                    let (before, after) = self.ignore.split_at_mut(l);
+                    mask::pool_or_into(
+                        &before[l - 1],
+                        level_size(self.size, l - 1),
+                        &mut after[0],
+                        level_size(self.size, l),
+                    );
+                }
+                true
+            }
+            None => false,
+        };
+        for l in finest..cfg.levels {
+            let Some(level) = reference.level(l) else {
+                return Err(missing_level(l));
+            };
+            let pts = &mut self.points[l];
+            pts.clear();
+            let k = level.intrinsics;
+            let (fx_inv, fy_inv) = (1.0 / k.fx as f32, 1.0 / k.fy as f32);
+            let (cx, cy) = (k.cx as f32, k.cy as f32);
+            let w = level.size().width;
+            let depth = level.depth_m.as_slice();
+            let gray = level.gray.as_slice();
+            let ignore = &self.ignore[l];
+            for (i, (&z, &g)) in depth.iter().zip(gray).enumerate() {
+                if !(z > 0.0 && z >= cfg.min_depth_m && z <= cfg.max_depth_m) {
+                    continue;
+                }
+                if have_mask && ignore[i] != 0 {
+                    continue;
+                }
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                pts.push(ReferencePoint {
+                    point_m: [(x - cx) * fx_inv * z, (y - cy) * fy_inv * z, z],
+                    intensity: g,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn check_pyramid(&self, what: &str, p: &ImagePyramid) -> Result<()> {
+        if p.size() != self.size {
+            return Err(Error::SizeMismatch {
+                what: what.into(),
+                expected: self.size,
+                found: p.size(),
+            });
+        }
+        if p.num_levels() < self.config.levels || p.finest_level() > self.config.finest_level {
+            return Err(missing_level(self.config.finest_level));
+        }
+        Ok(())
+    }
+
+    /// Estimates `current_from_reference` between two built pyramids, coarse to fine.
+    /// `initial_current_from_reference` defaults to identity.
+    ///
+    /// # Errors
+    /// Size or level mismatches between the pyramids, mask and estimator. A motion that
+    /// cannot be estimated is not an error: it is a [`DvoStatus::Failed`] estimate.
+    pub fn estimate(
+        &mut self,
+        reference: &ImagePyramid,
+        current: &ImagePyramid,
+        ignore_in_reference: Option<&Mask>,
+        initial_current_from_reference: Option<&Isometry3<f64>>,
+    ) -> Result<DvoEstimate> {
+        self.prepare_reference(reference, ignore_in_reference)?;
+        self.estimate_prepared(current, initial_current_from_reference)
+    }
+
+    /// [`Self::estimate`] with the reference already prepared by [`Self::prepare_reference`].
+    ///
+    /// # Errors
+    /// As [`Self::estimate`].
+    pub fn estimate_prepared(
+        &mut self,
+        current: &ImagePyramid,
+        initial_current_from_reference: Option<&Isometry3<f64>>,
+    ) -> Result<DvoEstimate> {
+        self.check_pyramid("current pyramid", current)?;
+        let cfg = self.config;
+        let initial = initial_current_from_reference
+            .copied()
+            .unwrap_or_else(Isometry3::identity);
+        let finite = initial.translation.vector.iter().all(|v| v.is_finite())
+            && initial.rotation.coords.iter().all(|v| v.is_finite());
+        if !finite {
+            return Err(Error::InvalidParameter {
+                name: "initial_current_from_reference",
+                value: format!("{initial:?}"),
+                expected: "a finite transform".into(),
+            });
+        }
+        let mut estimate = DvoEstimate {
+            current_from_reference: initial,
+            status: DvoStatus::Converged,
+            iterations_per_level: [0; MAX_DVO_LEVELS],
+            stop_per_level: [None; MAX_DVO_LEVELS],
+            final_cost: 0.0,
+            pixels_used: 0,
+            reference_pixels: self.points[cfg.finest_level].len(),
+        };
+        let schedule = cfg.schedule();
+        let mut pose = initial;
+        for l in (cfg.finest_level..cfg.levels).rev() {
+            let Some(level) = current.level(l) else {
+                return Err(missing_level(l));
+            };
+            let points = &self.points[l];
+            let required = cfg.required_pixels(l);
+            let is_finest = l == cfg.finest_level;
+            if points.len() < required {
+                if is_finest {
+                    return Ok(failed(
+                        estimate,
+                        initial,
+                        DvoFailure::TooFewPixels {
+                            found: points.len(),
+                            required,
+                        },
+                    ));
+                }
+                continue; // a coarse level without enough pixels is skipped
+            }
+            let target = TargetView {
+                samples: &level.samples,
+                size: level.size(),
+                intrinsics: level.intrinsics,
+            };
+            let cost = cfg.cost_at_level(l);
+            let mut level_pose = pose;
+            match solver::optimize_level(
+                points,
+                level.size().width,
+                &target,
+                &cost,
+                &schedule,
+                &mut level_pose,
+            ) {
+                Ok(res) => {
+                    estimate.iterations_per_level[l] = res.iterations as u32;
+                    estimate.stop_per_level[l] = Some(res.stop);
+                    let ne = res.normal_equations;
+                    if ne.inliers < required {
+                        if is_finest {
+                            return Ok(failed(
+                                estimate,
+                                initial,
+                                DvoFailure::TooFewPixels {
+                                    found: ne.inliers,
+                                    required,
+                                },
+                            ));
+                        }
+                        continue; // keep the pose from the coarser level
+                    }
+                    pose = level_pose;
+                    if is_finest {
+                        estimate.final_cost = ne.mean_cost();
+                        estimate.pixels_used = ne.inliers;
+                    }
+                }
+                Err(LevelError::Degenerate) => {
+                    return Ok(failed(estimate, initial, DvoFailure::Degenerate { level: l }));
+                }
+                Err(LevelError::NonFinite) => {
+                    return Ok(failed(estimate, initial, DvoFailure::NonFinite { level: l }));
+                }
+            }
+        }
+        let finite = pose.translation.vector.iter().all(|v| v.is_finite())
+            && pose.rotation.coords.iter().all(|v| v.is_finite());
+        if !finite {
+            return Ok(failed(
+                estimate,
+                initial,
+                DvoFailure::NonFinite {
+                    level: cfg.finest_level,
+                },
+            ));
+        }
+        estimate.current_from_reference = pose;
+        Ok(estimate)
+    }
+}
+
+fn failed(mut estimate: DvoEstimate, initial: Isometry3<f64>, reason: DvoFailure) -> DvoEstimate {
+    estimate.current_from_reference = initial;
+    estimate.status = DvoStatus::Failed(reason);
+    estimate
+}
+
+fn missing_level(level: usize) -> Error {
+    Error::InvalidParameter {
+        name: "pyramid",
+        value: format!("without level {level}"),
+        expected: "a pyramid built with the estimator's levels and finest level".into(),
+    }
+}
+
+/// Frame-to-frame DVO over a sequence: keeps the previous frame's pyramid as the reference.
+///
+/// Everything is allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds the new
+/// frame's pyramid once, estimates the motion from the previous frame, then swaps the two
+/// pyramids (no copy, no allocation).
+#[derive(Debug, Clone)]
+pub struct DvoTracker {
+    estimator: DvoEstimator,
+    reference: ImagePyramid,
+    current: ImagePyramid,
+    has_reference: bool,
+    previous_motion: Option<Isometry3<f64>>,
+}
+
+impl DvoTracker {
+    /// A tracker for frames of `size` seen through `intrinsics` (level-0 values).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for an invalid config, invalid intrinsics, or a size too
+    /// small for the requested levels.
+    pub fn new(size: ImageSize, intrinsics: PinholeIntrinsics, config: DvoConfig) -> Result<Self> {
+        let estimator = DvoEstimator::new(size, config)?;
+        let reference = ImagePyramid::new(size, intrinsics, config.levels, config.finest_level)?;
+        let current = reference.clone();
+        Ok(Self {
+            estimator,
+            reference,
+            current,
+            has_reference: false,
+            previous_motion: None,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DvoConfig {
+        self.estimator.config()
+    }
+
+    /// Forgets the reference frame (the next [`Self::track`] returns `None`) and the motion prior.
+    pub fn reset(&mut self) {
+        self.has_reference = false;
+        self.previous_motion = None;
+    }
+
+    /// Adds a frame: returns the motion from the previous frame to this one (`None` for the
+    /// first frame after creation or [`Self::reset`]), then keeps this frame as the reference.
+    ///
+    /// `ignore_in_reference` (nonzero = ignore) lives on the *previous* frame's pixel grid
+    /// (the moving objects detected there); it is dilated per the config. The initial guess
+    /// is `initial_current_from_reference`, else the previous converged motion when
+    /// [`DvoConfig::init_from_previous_motion`] is set, else identity.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when an image or the mask is not the tracker's size (the
+    /// tracker's state is then unchanged), [`Error::InvalidParameter`] for a non-finite
+    /// initial guess.
+    pub fn track(
+        &mut self,
+        gray: &GrayF32,
+        depth_m: &DepthMeters,
+        ignore_in_reference: Option<&Mask>,
+        initial_current_from_reference: Option<&Isometry3<f64>>,
+    ) -> Result<Option<DvoEstimate>> {
+        if let Some(m) = ignore_in_reference {
+            if m.size() != self.reference.size() {
+                return Err(Error::SizeMismatch {
+                    what: "ignore mask vs frame".into(),
+                    expected: self.reference.size(),
+                    found: m.size(),
+                });
+            }
+        }
+        self.current.build(gray, depth_m)?;
+        if !self.has_reference {
+            std::mem::swap(&mut self.reference, &mut self.current);
+            self.has_reference = true;
+            return Ok(None);
+        }
+        let prior = if self.config().init_from_previous_motion {
+            self.previous_motion
+        } else {
+            None
+        };
+        let initial = initial_current_from_reference.copied().or(prior);
+        let estimate = self.estimator.estimate(
+            &self.reference,
+            &self.current,
+            ignore_in_reference,
+            initial.as_ref(),
+        )?;
+        std::mem::swap(&mut self.reference, &mut self.current);
+        self.previous_motion = estimate.is_converged().then_some(estimate.current_from_reference);
+        Ok(Some(estimate))
+    }
+
+    /// Estimates the motion between two explicitly given frames with the tracker's buffers
+    /// (for tests and benchmarks); afterwards `current` is the tracker's reference.
+    ///
+    /// # Errors
+    /// As [`Self::track`].
+    pub fn estimate_between(
+        &mut self,
+        reference: (&GrayF32, &DepthMeters),
+        current: (&GrayF32, &DepthMeters),
+        ignore_in_reference: Option<&Mask>,
+        initial_current_from_reference: Option<&Isometry3<f64>>,
+    ) -> Result<DvoEstimate> {
+        self.reset();
+        self.track(reference.0, reference.1, None, None)?;
+        let est = self.track(
+            current.0,
+            current.1,
+            ignore_in_reference,
+            initial_current_from_reference,
+        )?;
+        est.ok_or_else(|| Error::InvalidParameter {
+            name: "reference",
+            value: "missing".into(),
+            expected: "a reference frame (internal error)".into(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn profiles_validate_and_differ_where_documented() {
+        DvoConfig::paper().validate().unwrap();
+        DvoConfig::release().validate().unwrap();
+        assert_eq!(DvoConfig::default(), DvoConfig::paper());
+        let r = DvoConfig::release();
+        assert!((r.k_intensity.at_level(3) - 16.0 / 255.0).abs() < 1e-6);
+        assert!((r.k_intensity.at_level(0) - 61.61 / 255.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn validation_names_the_bad_field() {
+        let cases: Vec<(DvoConfig, &str)> = vec![
+            (
+                DvoConfig {
+                    levels: 0,
+                    ..DvoConfig::paper()
+                },
+                "levels",
+            ),
+            (
+                DvoConfig {
+                    finest_level: 4,
+                    ..DvoConfig::paper()
+                },
+                "finest_level",
+            ),
+            (
+                DvoConfig {
+                    lm_lambda_up: 1.0,
+                    ..DvoConfig::paper()
+                },
+                "lm_lambda_up",
+            ),
+            (
+                DvoConfig {
+                    k_depth_m: f32::NAN,
+                    ..DvoConfig::paper()
+                },
+                "k_depth_m",
+            ),
+            (
+                DvoConfig {
+                    k_intensity: IntensityThreshold::Constant(0.0),
+                    ..DvoConfig::paper()
+                },
+                "k_intensity",
+            ),
+            (
+                DvoConfig {
+                    step_tolerance: -1.0,
+                    ..DvoConfig::paper()
+                },
+                "step_tolerance",
+            ),
+            (
+                DvoConfig {
+                    max_depth_m: 0.0,
+                    ..DvoConfig::paper()
+                },
+                "max_depth_m",
+            ),
+            (
+                DvoConfig {
+                    min_usable_pixels: 2,
+                    ..DvoConfig::paper()
+                },
+                "min_usable_pixels",
+            ),
+        ];
+        for (cfg, name) in cases {
+            match cfg.validate() {
+                Err(Error::InvalidParameter { name: n, .. }) => assert_eq!(n, name),
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+    }
+}

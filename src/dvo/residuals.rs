@@ -1,0 +1,721 @@
+//! Residuals, Jacobians and the row-parallel accumulation of the 6×6 normal equations.
+//!
+//! For a reference point p (reference camera, metres) and the current estimate
+//! T = current_from_reference, let p′ = T·p = (x, y, z) and w = π(p′) its pixel in the current
+//! image. Both residuals read the current level with **bilinear** interpolation at w, for the
+//! values and for their gradients alike (algorithm.md §4.5):
+//! - photometric r_I = I_cur(w) − I_ref(p);
+//! - geometric r_Z = Z_cur(w) − z, against the *transformed* depth z (dvo_slam / Open3D form).
+//!
+//! With the left perturbation T ← exp(δ)·T, δ = (v, ω), ∂p′/∂δ = [I₃ | −[p′]×], and for an image
+//! gradient g = (g_x, g_y) at w: a = J_πᵀ g = (f_x g_x / z, f_y g_y / z, −(f_x g_x x + f_y g_y y)/z²),
+//! so ∂(value at w)/∂δ = [a, p′ × a]. The photometric Jacobian is that with g = ∇I; the geometric
+//! one uses g = ∇Z and subtracts ∂z/∂δ = (0, 0, 1, y, −x, 0) (the third row of ∂p′/∂δ), i.e.
+//! J_Z = [b, p′ × b] with b = a_Z − e₃.
+//!
+//! The robust cost is Σ ρ_{k_I}(r_I) + γ Σ ρ_{k_Z}(r_Z) (bi-square, [`super::weights`]), summed
+//! over *all* reference points: a point that projects outside the image or onto missing depth
+//! pays the saturated loss, so the cost of two candidate poses is always comparable.
+
+use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
+use rayon::prelude::*;
+
+use super::weights::{bisquare, bisquare_saturated};
+use crate::geometry::PinholeIntrinsics;
+use crate::image_buf::ImageSize;
+use crate::pyramid::TargetSample;
+
+/// Reference points processed per rayon task, as rows of the level they come from: at the
+/// default finest level (320 px wide, ≈ 70 % valid depth) 8 rows are ≈ 1.8 k points, about
+/// 30 µs of work, so a 240-row level splits into 30 tasks (load balance on 2–8 cores) while
+/// the per-task reduction of a 6×6 system stays negligible.
+pub const ROWS_PER_TASK: usize = 8;
+
+/// Points accumulated in f32 before the partial sums are flushed into the f64 totals: short
+/// enough that f32 rounding stays below 1e-5 relative, long enough to keep the flush cheap.
+const F32_FLUSH_POINTS: usize = 128;
+
+/// A transformed depth below this (metres) cannot be projected meaningfully.
+pub const MIN_TRANSFORMED_DEPTH_M: f32 = 1e-3;
+
+/// A reference pixel back-projected into its camera, with its intensity.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ReferencePoint {
+    /// Point in the reference camera frame, metres.
+    pub point_m: [f32; 3],
+    /// Reference intensity in [0, 1].
+    pub intensity: f32,
+}
+
+/// Robust-cost constants of one level.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CostParams {
+    /// Bi-square threshold of the photometric residual (intensity units, [0, 1] scale).
+    pub k_intensity: f32,
+    /// Bi-square threshold of the depth residual, metres.
+    pub k_depth_m: f32,
+    /// Weight γ of the depth term.
+    pub depth_weight: f32,
+}
+
+impl CostParams {
+    /// Loss of a reference point that cannot be evaluated at all.
+    #[inline]
+    fn saturated_point(&self) -> f32 {
+        bisquare_saturated(self.k_intensity) + self.depth_weight * bisquare_saturated(self.k_depth_m)
+    }
+}
+
+/// The current (target) level as the kernel reads it.
+#[derive(Debug, Clone, Copy)]
+pub struct TargetView<'a> {
+    /// Packed samples, row-major.
+    pub samples: &'a [TargetSample],
+    /// Level size.
+    pub size: ImageSize,
+    /// Level intrinsics.
+    pub intrinsics: PinholeIntrinsics,
+}
+
+/// Weighted normal equations H δ = −g of the robust cost, plus the cost itself.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NormalEquations {
+    /// Upper triangle of H = Σ w JᵀJ, row-major (H₀₀, H₀₁, …, H₀₅, H₁₁, …, H₅₅).
+    pub hessian_upper: [f64; 21],
+    /// g = Σ w Jᵀ r.
+    pub gradient: [f64; 6],
+    /// Σ ρ over all reference points (saturated loss for unusable ones).
+    pub cost: f64,
+    /// Reference points that project inside the current image.
+    pub valid: usize,
+    /// Of those, points with a non-zero robust weight in either channel.
+    pub inliers: usize,
+    /// Reference points evaluated.
+    pub total: usize,
+}
+
+impl Default for NormalEquations {
+    fn default() -> Self {
+        Self {
+            hessian_upper: [0.0; 21],
+            gradient: [0.0; 6],
+            cost: 0.0,
+            valid: 0,
+            inliers: 0,
+            total: 0,
+        }
+    }
+}
+
+impl NormalEquations {
+    /// Sum of two partial systems.
+    pub fn merged(mut self, other: &Self) -> Self {
+        for (a, b) in self.hessian_upper.iter_mut().zip(&other.hessian_upper) {
+            *a += b;
+        }
+        for (a, b) in self.gradient.iter_mut().zip(&other.gradient) {
+            *a += b;
+        }
+        self.cost += other.cost;
+        self.valid += other.valid;
+        self.inliers += other.inliers;
+        self.total += other.total;
+        self
+    }
+
+    /// H as a full symmetric matrix.
+    pub fn hessian(&self) -> Matrix6<f64> {
+        let mut h = Matrix6::zeros();
+        let mut k = 0;
+        for i in 0..6 {
+            for j in i..6 {
+                h[(i, j)] = self.hessian_upper[k];
+                h[(j, i)] = self.hessian_upper[k];
+                k += 1;
+            }
+        }
+        h
+    }
+
+    /// g as a vector.
+    pub fn gradient_vector(&self) -> Vector6<f64> {
+        Vector6::from_column_slice(&self.gradient)
+    }
+
+    /// Cost per reference point (comparable across levels and frames); 0 without points.
+    pub fn mean_cost(&self) -> f64 {
+        if self.total == 0 {
+            0.0
+        } else {
+            self.cost / self.total as f64
+        }
+    }
+}
+
+/// Residuals and Jacobians of one reference point (reference implementation, f64).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointLinearization {
+    /// Photometric residual r_I.
+    pub residual_intensity: f64,
+    /// ∂r_I/∂δ.
+    pub jacobian_intensity: Vector6<f64>,
+    /// Depth residual r_Z (metres) and its Jacobian, when the current depth is usable at w.
+    pub depth: Option<(f64, Vector6<f64>)>,
+}
+
+/// Bilinear interpolation of the packed samples at (u, v) (reference version, f64). `None`
+/// outside [0, W−1) × [0, H−1), the domain where all four corners exist.
+pub fn sample_bilinear(target: &TargetView<'_>, u: f64, v: f64) -> Option<[f64; 6]> {
+    let (w, h) = (target.size.width, target.size.height);
+    if !(u >= 0.0 && v >= 0.0 && u < (w as f64 - 1.0) && v < (h as f64 - 1.0)) {
+        return None;
+    }
+    let (x0, y0) = (u.floor() as usize, v.floor() as usize);
+    let (a, b) = (u - x0 as f64, v - y0 as f64);
+    let corners = [
+        (y0 * w + x0, (1.0 - a) * (1.0 - b)),
+        (y0 * w + x0 + 1, a * (1.0 - b)),
+        ((y0 + 1) * w + x0, (1.0 - a) * b),
+        ((y0 + 1) * w + x0 + 1, a * b),
+    ];
+    let mut out = [0.0; 6];
+    for (idx, wt) in corners {
+        for (o, &s) in out.iter_mut().zip(&target.samples[idx].0[..6]) {
+            *o += wt * f64::from(s);
+        }
+    }
+    Some(out)
+}
+
+/// Residuals and Jacobians of one point at `current_from_reference` (reference
+/// implementation in f64 with nalgebra; the fast kernel must agree with it). `None` when the
+/// point does not project inside the bilinear domain of the current level.
+pub fn linearize_point(
+    point: &ReferencePoint,
+    target: &TargetView<'_>,
+    current_from_reference: &Isometry3<f64>,
+) -> Option<PointLinearization> {
+    let p = Point3::new(
+        f64::from(point.point_m[0]),
+        f64::from(point.point_m[1]),
+        f64::from(point.point_m[2]),
+    );
+    let q = current_from_reference * p;
+    if q.z <= f64::from(MIN_TRANSFORMED_DEPTH_M) {
+        return None;
+    }
+    let k = &target.intrinsics;
+    let uv = k.project(&q)?;
+    let s = sample_bilinear(target, uv.x, uv.y)?;
+    // J_π (2×3) and ∂p′/∂δ = [I | −[p′]×] (3×6).
+    let j_pi = nalgebra::Matrix2x3::new(
+        k.fx / q.z,
+        0.0,
+        -k.fx * q.x / (q.z * q.z),
+        0.0,
+        k.fy / q.z,
+        -k.fy * q.y / (q.z * q.z),
+    );
+    let mut d_point = nalgebra::Matrix3x6::zeros();
+    d_point
+        .fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&nalgebra::Matrix3::identity());
+    d_point
+        .fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(-q.coords.cross_matrix()));
+    let j_warp = j_pi * d_point; // 2×6: ∂w/∂δ
+    let grad_i = nalgebra::RowVector2::new(s[1], s[2]);
+    let jacobian_intensity = (grad_i * j_warp).transpose();
+    let depth = if s[3].is_finite() && s[4].is_finite() && s[5].is_finite() {
+        let grad_z = nalgebra::RowVector2::new(s[4], s[5]);
+        let dz = d_point.row(2);
+        Some((s[3] - q.z, (grad_z * j_warp - dz).transpose()))
+    } else {
+        None
+    };
+    Some(PointLinearization {
+        residual_intensity: s[0] - f64::from(point.intensity),
+        jacobian_intensity,
+        depth,
+    })
+}
+
+/// Scalar reference of the normal-equation accumulation: one thread, f64, nalgebra, built on
+/// [`linearize_point`]. Slow; kept to test [`accumulate_normal_equations`] against.
+pub fn accumulate_normal_equations_scalar(
+    points: &[ReferencePoint],
+    target: &TargetView<'_>,
+    current_from_reference: &Isometry3<f64>,
+    cost: &CostParams,
+) -> NormalEquations {
+    let mut h = Matrix6::<f64>::zeros();
+    let mut g = Vector6::<f64>::zeros();
+    let mut ne = NormalEquations {
+        total: points.len(),
+        ..Default::default()
+    };
+    let (k_i, k_z, gamma) = (cost.k_intensity, cost.k_depth_m, cost.depth_weight);
+    for p in points {
+        let Some(lin) = linearize_point(p, target, current_from_reference) else {
+            ne.cost += f64::from(cost.saturated_point());
+            continue;
+        };
+        ne.valid += 1;
+        let (rho_i, w_i) = bisquare(lin.residual_intensity as f32, k_i);
+        ne.cost += f64::from(rho_i);
+        let w_i = f64::from(w_i);
+        h += w_i * lin.jacobian_intensity * lin.jacobian_intensity.transpose();
+        g += w_i * lin.residual_intensity * lin.jacobian_intensity;
+        let mut w_z_pos = false;
+        match lin.depth {
+            Some((r_z, j_z)) => {
+                let (rho_z, w_z) = bisquare(r_z as f32, k_z);
+                ne.cost += f64::from(gamma * rho_z);
+                let w_z = f64::from(gamma * w_z);
+                w_z_pos = w_z > 0.0;
+                h += w_z * j_z * j_z.transpose();
+                g += w_z * r_z * j_z;
+            }
+            None => ne.cost += f64::from(gamma * bisquare_saturated(k_z)),
+        }
+        if w_i > 0.0 || w_z_pos {
+            ne.inliers += 1;
+        }
+    }
+    let mut k = 0;
+    for i in 0..6 {
+        for j in i..6 {
+            ne.hessian_upper[k] = h[(i, j)];
+            k += 1;
+        }
+    }
+    ne.gradient.copy_from_slice(g.as_slice());
+    ne
+}
+
+/// The fast kernel: [`accumulate_normal_equations_scalar`] in f32 per point with f64 totals,
+/// row-parallel with rayon (fold per task, then reduce). `row_width` is the width of the level
+/// the points came from (it only sets the task size, see [`ROWS_PER_TASK`]).
+pub fn accumulate_normal_equations(
+    points: &[ReferencePoint],
+    row_width: usize,
+    target: &TargetView<'_>,
+    current_from_reference: &Isometry3<f64>,
+    cost: &CostParams,
+) -> NormalEquations {
+    let kernel = KernelConstants::new(target, current_from_reference, cost);
+    let chunk = (ROWS_PER_TASK * row_width).max(1);
+    points
+        .par_chunks(chunk)
+        .fold(NormalEquations::default, |acc, c| {
+            acc.merged(&accumulate_chunk(c, target.samples, &kernel))
+        })
+        .reduce(NormalEquations::default, |a, b| a.merged(&b))
+}
+
+/// Everything the kernel needs, converted to f32 once per call.
+struct KernelConstants {
+    rotation: [f32; 9],
+    translation: [f32; 3],
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+    width: usize,
+    u_max: f32,
+    v_max: f32,
+    cost: CostParams,
+    saturated_point: f32,
+}
+
+impl KernelConstants {
+    fn new(target: &TargetView<'_>, t: &Isometry3<f64>, cost: &CostParams) -> Self {
+        let r = t.rotation.to_rotation_matrix();
+        let m = r.matrix();
+        let k = &target.intrinsics;
+        Self {
+            rotation: [
+                m[(0, 0)] as f32,
+                m[(0, 1)] as f32,
+                m[(0, 2)] as f32,
+                m[(1, 0)] as f32,
+                m[(1, 1)] as f32,
+                m[(1, 2)] as f32,
+                m[(2, 0)] as f32,
+                m[(2, 1)] as f32,
+                m[(2, 2)] as f32,
+            ],
+            translation: [
+                t.translation.vector.x as f32,
+                t.translation.vector.y as f32,
+                t.translation.vector.z as f32,
+            ],
+            fx: k.fx as f32,
+            fy: k.fy as f32,
+            cx: k.cx as f32,
+            cy: k.cy as f32,
+            width: target.size.width,
+            u_max: target.size.width as f32 - 1.0,
+            v_max: target.size.height as f32 - 1.0,
+            cost: *cost,
+            saturated_point: cost.saturated_point(),
+        }
+    }
+}
+
+/// Points evaluated together: the per-point arithmetic after the bilinear gather runs as
+/// loops over this many lanes, which the compiler turns into SIMD (two SSE registers on the
+/// x86-64 baseline, one AVX register where available).
+const LANES: usize = 8;
+
+/// Lane-wise f32 partial sums of a run of points (one column per lane).
+struct LaneSums {
+    h: [[f32; LANES]; 21],
+    g: [[f32; LANES]; 6],
+    cost: [f32; LANES],
+}
+
+impl LaneSums {
+    fn new() -> Self {
+        Self {
+            h: [[0.0; LANES]; 21],
+            g: [[0.0; LANES]; 6],
+            cost: [0.0; LANES],
+        }
+    }
+
+    /// H += w·J·Jᵀ (upper triangle), g += w·r·J for every lane.
+    #[inline(always)]
+    fn add(&mut self, j: &[[f32; LANES]; 6], weight: &[f32; LANES], residual: &[f32; LANES]) {
+        let mut k = 0;
+        for a in 0..6 {
+            let mut wa = [0.0f32; LANES];
+            for l in 0..LANES {
+                wa[l] = weight[l] * j[a][l];
+            }
+            for jb in &j[a..] {
+                let h = &mut self.h[k];
+                for l in 0..LANES {
+                    h[l] += wa[l] * jb[l];
+                }
+                k += 1;
+            }
+            let g = &mut self.g[a];
+            for l in 0..LANES {
+                g[l] += wa[l] * residual[l];
+            }
+        }
+    }
+
+    fn flush_into(&mut self, ne: &mut NormalEquations) {
+        for (t, s) in ne.hessian_upper.iter_mut().zip(&self.h) {
+            *t += s.iter().map(|&v| f64::from(v)).sum::<f64>();
+        }
+        for (t, s) in ne.gradient.iter_mut().zip(&self.g) {
+            *t += s.iter().map(|&v| f64::from(v)).sum::<f64>();
+        }
+        ne.cost += self.cost.iter().map(|&v| f64::from(v)).sum::<f64>();
+        *self = Self::new();
+    }
+}
+
+/// Branch-free bi-square (ρ, w) for a lane; `inv_k` = 1/k, `rho_sat` = k²/6.
+#[inline(always)]
+fn bisquare_lane(residual: f32, inv_k: f32, rho_sat: f32) -> (f32, f32) {
+    let s = residual * inv_k;
+    let one_minus = (1.0 - s * s).max(0.0);
+    let w = one_minus * one_minus;
+    (rho_sat * (1.0 - w * one_minus), w)
+}
+
+/// The Jacobian [a, p′ × a] of a value whose image gradient, pre-scaled by f/z, is (gu, gv),
+/// minus `dz` times ∂z/∂δ (dz = 1 for the depth residual, 0 for intensity).
+#[inline(always)]
+fn jacobian_lane(gu: f32, gv: f32, x: f32, y: f32, z: f32, iz: f32, dz: f32) -> [f32; 6] {
+    let a2 = -(gu * x + gv * y) * iz - dz;
+    [gu, gv, a2, y * a2 - z * gv, z * gu - x * a2, x * gv - y * gu]
+}
+
+// `!(a > b)` is deliberate: a NaN must take the reject branch.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn accumulate_chunk(
+    points: &[ReferencePoint],
+    samples: &[TargetSample],
+    kc: &KernelConstants,
+) -> NormalEquations {
+    let mut ne = NormalEquations {
+        total: points.len(),
+        ..Default::default()
+    };
+    let r = &kc.rotation;
+    let t = &kc.translation;
+    let w = kc.width;
+    let (inv_ki, inv_kz) = (1.0 / kc.cost.k_intensity, 1.0 / kc.cost.k_depth_m);
+    let (sat_i, sat_z) = (
+        bisquare_saturated(kc.cost.k_intensity),
+        bisquare_saturated(kc.cost.k_depth_m),
+    );
+    let gamma = kc.cost.depth_weight;
+    let mut sums = LaneSums::new();
+    for run in points.chunks(F32_FLUSH_POINTS) {
+        for block in run.chunks(LANES) {
+            // Stage 1 (scalar per lane): transform, project, bilinear gather. Lanes that cannot
+            // be evaluated keep valid = 0 and harmless finite values.
+            let mut valid = [0.0f32; LANES];
+            let mut depth_ok = [0.0f32; LANES];
+            let mut px = [0.0f32; LANES];
+            let mut py = [0.0f32; LANES];
+            let mut pz = [1.0f32; LANES];
+            let mut s = [[0.0f32; LANES]; 6];
+            let mut ref_i = [0.0f32; LANES];
+            for (l, p) in block.iter().enumerate() {
+                let [qx, qy, qz] = p.point_m;
+                let x = r[0] * qx + r[1] * qy + r[2] * qz + t[0];
+                let y = r[3] * qx + r[4] * qy + r[5] * qz + t[1];
+                let z = r[6] * qx + r[7] * qy + r[8] * qz + t[2];
+                if !(z > MIN_TRANSFORMED_DEPTH_M) {
+                    sums.cost[l] += kc.saturated_point;
+                    continue;
+                }
+                let iz = 1.0 / z;
+                let u = kc.fx * x * iz + kc.cx;
+                let v = kc.fy * y * iz + kc.cy;
+                if !(u >= 0.0 && v >= 0.0 && u < kc.u_max && v < kc.v_max) {
+                    sums.cost[l] += kc.saturated_point;
+                    continue;
+                }
+                let (x0, y0) = (u as usize, v as usize);
+                let (a, b) = (u - x0 as f32, v - y0 as f32);
+                let i = y0 * w + x0;
+                let (s00, s01, s10, s11) = (
+                    &samples[i].0,
+                    &samples[i + 1].0,
+                    &samples[i + w].0,
+                    &samples[i + w + 1].0,
+                );
+                let (w00, w01, w10, w11) = ((1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b);
+                let mut v6 = [0.0f32; 6];
+                for (k, vk) in v6.iter_mut().enumerate() {
+                    *vk = w00 * s00[k] + w01 * s01[k] + w10 * s10[k] + w11 * s11[k];
+                }
+                // NaN depth or depth gradient at any corner makes these NaN: drop the depth term
+                // (0 · NaN would poison the sums, so the values are zeroed too).
+                let d_ok = v6[3].is_finite() && v6[4].is_finite() && v6[5].is_finite();
+                if !d_ok {
+                    v6[3] = z;
+                    v6[4] = 0.0;
+                    v6[5] = 0.0;
+                }
+                for (k, vk) in v6.iter().enumerate() {
+                    s[k][l] = *vk;
+                }
+                valid[l] = 1.0;
+                depth_ok[l] = if d_ok { 1.0 } else { 0.0 };
+                px[l] = x;
+                py[l] = y;
+                pz[l] = z;
+                ref_i[l] = p.intensity;
+            }
+            // Stage 2 (lane-parallel): residuals, robust weights, Jacobians, accumulation.
+            let mut jac_i = [[0.0f32; LANES]; 6];
+            let mut jac_z = [[0.0f32; LANES]; 6];
+            let (mut r_i, mut w_i, mut r_z, mut w_z) =
+                ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+            for l in 0..LANES {
+                let (x, y, z) = (px[l], py[l], pz[l]);
+                let iz = 1.0 / z;
+                r_i[l] = s[0][l] - ref_i[l];
+                let (rho_i, wi) = bisquare_lane(r_i[l], inv_ki, sat_i);
+                w_i[l] = wi * valid[l];
+                r_z[l] = s[3][l] - z;
+                let (rho_z, wz) = bisquare_lane(r_z[l], inv_kz, sat_z);
+                w_z[l] = gamma * wz * depth_ok[l];
+                sums.cost[l] +=
+                    valid[l] * (rho_i + gamma * (depth_ok[l] * rho_z + (1.0 - depth_ok[l]) * sat_z));
+                let ji = jacobian_lane(s[1][l] * kc.fx * iz, s[2][l] * kc.fy * iz, x, y, z, iz, 0.0);
+                let jz = jacobian_lane(s[4][l] * kc.fx * iz, s[5][l] * kc.fy * iz, x, y, z, iz, 1.0);
+                for k in 0..6 {
+                    jac_i[k][l] = ji[k];
+                    jac_z[k][l] = jz[k];
+                }
+            }
+            sums.add(&jac_i, &w_i, &r_i);
+            sums.add(&jac_z, &w_z, &r_z);
+            for l in 0..LANES {
+                ne.valid += usize::from(valid[l] > 0.0);
+                ne.inliers += usize::from(w_i[l] > 0.0 || w_z[l] > 0.0);
+            }
+        }
+        sums.flush_into(&mut ne);
+    }
+    ne
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{camera::presets, se3_exp, Twist};
+    use crate::image_buf::{DepthMeters, GrayF32};
+    use crate::pyramid::ImagePyramid;
+
+    /// A smooth textured slanted scene, so finite differences are meaningful.
+    fn smooth_level() -> ImagePyramid {
+        let size = ImageSize::new(160, 120);
+        let gray = GrayF32::from_fn(size, |x, y| {
+            let (x, y) = (x as f32, y as f32);
+            0.5 + 0.2 * (x * 0.05).sin() * (y * 0.035).cos() + 0.1 * ((x + 2.0 * y) * 0.025).sin()
+        });
+        let depth = DepthMeters::from_fn(size, |x, y| 1.5 + 0.004 * x as f32 + 0.002 * y as f32);
+        let k = presets::TUM_FR2.at_level(2);
+        let mut p = ImagePyramid::new(size, k, 1, 0).unwrap();
+        p.build(&gray, &depth).unwrap();
+        p
+    }
+
+    fn points_of(p: &ImagePyramid) -> Vec<ReferencePoint> {
+        let lv = p.level(0).unwrap();
+        let mut out = Vec::new();
+        for y in 0..lv.size().height {
+            for x in 0..lv.size().width {
+                let z = lv.depth_m.get(x, y);
+                // Off the pixel grid by a quarter pixel so no point projects exactly onto the
+                // border of the bilinear domain, where f32 and f64 may decide differently.
+                let q = lv
+                    .intrinsics
+                    .back_project(x as f64 + 0.25, y as f64 + 0.25, f64::from(z));
+                // Reference intensity slightly perturbed so residuals are non-zero.
+                let i = lv.gray.get(x, y) + 0.02 * ((x * 7 + y * 3) % 5) as f32 / 5.0;
+                out.push(ReferencePoint {
+                    point_m: [q.x as f32, q.y as f32, q.z as f32],
+                    intensity: i,
+                });
+            }
+        }
+        out
+    }
+
+    fn view(p: &ImagePyramid) -> TargetView<'_> {
+        let lv = p.level(0).unwrap();
+        TargetView {
+            samples: &lv.samples,
+            size: lv.size(),
+            intrinsics: lv.intrinsics,
+        }
+    }
+
+    const COST: CostParams = CostParams {
+        k_intensity: 48.0 / 255.0,
+        k_depth_m: 0.5,
+        depth_weight: 0.001,
+    };
+
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let pyr = smooth_level();
+        let target = view(&pyr);
+        let points = points_of(&pyr);
+        let t = se3_exp(&Twist::new(0.01, -0.005, 0.02, 0.004, -0.006, 0.002));
+        let eps = 1e-5;
+        let mut checked = 0;
+        let mut errors = Vec::new();
+        for p in points.iter().step_by(97) {
+            let Some(lin) = linearize_point(p, &target, &t) else {
+                continue;
+            };
+            let Some((_, jz)) = lin.depth else { continue };
+            let mut ok = true;
+            let (mut num_i, mut num_z) = (Vector6::zeros(), Vector6::zeros());
+            for k in 0..6 {
+                let mut d = Twist::zeros();
+                d[k] = eps;
+                let (Some(lp), Some(lm)) = (
+                    linearize_point(p, &target, &(se3_exp(&d) * t)),
+                    linearize_point(p, &target, &(se3_exp(&(-d)) * t)),
+                ) else {
+                    ok = false;
+                    break;
+                };
+                num_i[k] = (lp.residual_intensity - lm.residual_intensity) / (2.0 * eps);
+                match (lp.depth, lm.depth) {
+                    (Some((a, _)), Some((b, _))) => num_z[k] = (a - b) / (2.0 * eps),
+                    _ => ok = false,
+                }
+            }
+            if !ok {
+                continue;
+            }
+            errors.push((
+                (num_i - lin.jacobian_intensity).norm(),
+                lin.jacobian_intensity.norm(),
+                (num_z - jz).norm(),
+                jz.norm(),
+            ));
+            checked += 1;
+        }
+        // Bilinear values have piecewise-linear slopes while the gradients are bilinearly
+        // interpolated central differences: they differ by up to ½·|f''| per pixel, about 2 %
+        // of a typical gradient on this texture (wavelength ≥ 125 px), so the error is measured
+        // against the largest Jacobian (a point near a gradient extremum has a tiny Jacobian).
+        let max_i = errors.iter().fold(0.0f64, |m, e| m.max(e.1));
+        let max_z = errors.iter().fold(0.0f64, |m, e| m.max(e.3));
+        for &(ei, ni, ez, nz) in &errors {
+            assert!(
+                ei / max_i < 0.03,
+                "intensity Jacobian error {ei} (norm {ni}, max {max_i})"
+            );
+            assert!(
+                ez / max_z < 0.01,
+                "depth Jacobian error {ez} (norm {nz}, max {max_z})"
+            );
+        }
+        assert!(checked > 50, "only {checked} points checked");
+    }
+
+    #[test]
+    fn parallel_kernel_agrees_with_scalar_reference() {
+        let pyr = smooth_level();
+        let target = view(&pyr);
+        let points = points_of(&pyr);
+        for xi in [
+            Twist::zeros(),
+            Twist::new(0.02, -0.01, 0.03, 0.01, -0.02, 0.005),
+            Twist::new(-0.3, 0.0, 0.0, 0.0, 0.2, 0.0), // most points leave the view
+        ] {
+            let t = se3_exp(&xi);
+            let a = accumulate_normal_equations_scalar(&points, &target, &t, &COST);
+            let b = accumulate_normal_equations(&points, 160, &target, &t, &COST);
+            assert_eq!(a.total, b.total);
+            assert!(a.valid.abs_diff(b.valid) <= 2, "{} vs {}", a.valid, b.valid);
+            assert!(a.inliers.abs_diff(b.inliers) <= 2);
+            let rel = |x: f64, y: f64, scale: f64| (x - y).abs() / scale.max(1e-12);
+            assert!(
+                rel(a.cost, b.cost, a.cost) < 1e-4,
+                "cost {} vs {}",
+                a.cost,
+                b.cost
+            );
+            let hmax = a.hessian_upper.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (x, y) in a.hessian_upper.iter().zip(&b.hessian_upper) {
+                assert!(rel(*x, *y, hmax) < 1e-4, "H {x} vs {y}");
+            }
+            let gmax = a.gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (x, y) in a.gradient.iter().zip(&b.gradient) {
+                assert!(rel(*x, *y, gmax) < 1e-3, "g {x} vs {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn unusable_points_pay_the_saturated_cost() {
+        let pyr = smooth_level();
+        let target = view(&pyr);
+        let points = points_of(&pyr);
+        // Move everything behind the camera.
+        let t = se3_exp(&Twist::new(0.0, 0.0, -10.0, 0.0, 0.0, 0.0));
+        let ne = accumulate_normal_equations(&points, 160, &target, &t, &COST);
+        assert_eq!(ne.valid, 0);
+        let expected = points.len() as f64 * f64::from(COST.saturated_point());
+        assert!((ne.cost - expected).abs() < 1e-3 * expected);
+        assert!(ne.hessian_upper.iter().all(|&v| v == 0.0));
+    }
+}

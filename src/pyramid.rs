@@ -1,0 +1,569 @@
+//! Gray + depth image pyramids for dense visual odometry, preallocated once per sequence.
+//!
+//! Level 0 is the input resolution; level ℓ is 2^ℓ times smaller (odd sizes are cropped, as
+//! Matlab's release does, algorithm.md §4.1 b). Per level the pyramid holds:
+//! - `gray`: 2×2 box mean of the finer level (values in [0, 1]);
+//! - `depth_m`: an *edge-aware* 2×2 mean (see [`downsample_depth_into`]); 0 = invalid;
+//! - `samples`: one packed [`TargetSample`] per pixel (intensity, its gradient, depth, its
+//!   gradient) so that the DVO kernel reads all six values of a bilinear corner with one
+//!   cache line, the dvo_slam layout (algorithm.md §4.3);
+//! - the intrinsics of the level ([`PinholeIntrinsics::at_level`]: the 2×2 box mean puts coarse
+//!   pixel j at fine coordinate 2j + 0.5).
+//!
+//! # Depth pyramid choice
+//! A plain mean of the valid children blends foreground and background at depth edges and
+//! creates depths where no surface exists (algorithm.md §4.1 b does this); plain subsampling
+//! (dvo_slam) avoids that but samples fine pixel 2j, half a pixel away from where the intensity
+//! mean and the scaled intrinsics put coarse pixel j. Here a coarse depth is the mean of those
+//! valid children that lie within [`DEPTH_EDGE_RELATIVE`] of the *nearest* valid child: on a
+//! smooth surface it is the full 2×2 mean (centred at 2j + 0.5, noise averaged), across an edge
+//! it keeps only the foreground side, never a blend.
+//!
+//! Levels finer than the pyramid's `finest_level` are not built (the DVO does not use them),
+//! except for the intermediate ones needed to reach it; level 0 is then never copied.
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::geometry::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, GrayF32, ImageSize};
+
+/// Two depths closer than this fraction of the nearer one are taken to lie on one surface.
+/// Kinect-class sensors have ≈1 % depth noise at 1–4 m and a 2×2 block of a slanted surface
+/// spans well under 5 % of its depth except at grazing angles, while real depth edges
+/// (object against background) are usually ≥ 10 %.
+pub const DEPTH_EDGE_RELATIVE: f32 = 0.05;
+
+/// Rows processed per rayon task in the pyramid kernels. At 320 px per row, 16 rows are
+/// ≈ 5 k pixels (a few µs of work): big enough to amortise task overhead, small enough to
+/// balance two to eight cores on a 240-row level.
+pub const ROWS_PER_TASK: usize = 16;
+
+/// The smallest level side the pyramid accepts: the DVO's bilinear sampling and central
+/// differences need a few interior pixels, and coarser levels carry no usable signal.
+pub const MIN_LEVEL_SIDE_PX: usize = 8;
+
+/// Values of one pixel packed for bilinear gathers by the DVO kernel.
+///
+/// Index: [`TargetSample::INTENSITY`], `GRAD_X`, `GRAD_Y` (intensity per pixel), `DEPTH`
+/// (metres), `DEPTH_GRAD_X`, `DEPTH_GRAD_Y` (metres per pixel), then two pads so a sample is
+/// exactly 32 bytes. Depth and its gradient are NaN where the depth is invalid or a depth edge
+/// makes its gradient meaningless, so a bilinear mix touching such a pixel is NaN, which the
+/// kernel tests once.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C, align(32))]
+pub struct TargetSample(pub [f32; 8]);
+
+impl TargetSample {
+    /// Intensity in [0, 1].
+    pub const INTENSITY: usize = 0;
+    /// ∂I/∂x, per pixel (central difference, one-sided on the border).
+    pub const GRAD_X: usize = 1;
+    /// ∂I/∂y, per pixel.
+    pub const GRAD_Y: usize = 2;
+    /// Depth in metres (NaN = unusable).
+    pub const DEPTH: usize = 3;
+    /// ∂Z/∂x in metres per pixel (NaN = unusable).
+    pub const DEPTH_GRAD_X: usize = 4;
+    /// ∂Z/∂y in metres per pixel (NaN = unusable).
+    pub const DEPTH_GRAD_Y: usize = 5;
+}
+
+/// One pyramid level.
+#[derive(Debug, Clone)]
+pub struct PyramidLevel {
+    /// Intrinsics of this level.
+    pub intrinsics: PinholeIntrinsics,
+    /// Gray intensity, [0, 1].
+    pub gray: GrayF32,
+    /// Depth in metres, 0 = invalid.
+    pub depth_m: DepthMeters,
+    /// Packed intensity/depth/gradients per pixel, row-major (empty below the finest level).
+    pub samples: Vec<TargetSample>,
+}
+
+impl PyramidLevel {
+    /// The level's size.
+    pub fn size(&self) -> ImageSize {
+        self.gray.size()
+    }
+}
+
+/// Size of level `level` of an image of `size` (each halving crops an odd side).
+pub fn level_size(size: ImageSize, level: usize) -> ImageSize {
+    ImageSize::new(size.width >> level, size.height >> level)
+}
+
+/// A gray + depth pyramid, allocated once by [`ImagePyramid::new`] and refilled per frame by
+/// [`ImagePyramid::build`] without allocating.
+#[derive(Debug, Clone)]
+pub struct ImagePyramid {
+    size: ImageSize,
+    finest_level: usize,
+    levels: Vec<PyramidLevel>,
+}
+
+impl ImagePyramid {
+    /// Preallocates `num_levels` levels of an image of `size`, building levels
+    /// `finest_level..num_levels`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] when the intrinsics are invalid, `num_levels` is 0,
+    /// `finest_level ≥ num_levels`, or the coarsest level would be smaller than
+    /// [`MIN_LEVEL_SIDE_PX`] on a side.
+    pub fn new(
+        size: ImageSize,
+        intrinsics: PinholeIntrinsics,
+        num_levels: usize,
+        finest_level: usize,
+    ) -> Result<Self> {
+        if !intrinsics.is_valid() {
+            return Err(Error::InvalidParameter {
+                name: "intrinsics",
+                value: format!("{intrinsics:?}"),
+                expected: "finite values with fx, fy > 0".into(),
+            });
+        }
+        if num_levels == 0 || num_levels > 16 {
+            return Err(Error::InvalidParameter {
+                name: "levels",
+                value: num_levels.to_string(),
+                expected: "1..=16 pyramid levels".into(),
+            });
+        }
+        if finest_level >= num_levels {
+            return Err(Error::InvalidParameter {
+                name: "finest_level",
+                value: finest_level.to_string(),
+                expected: format!("a level below the number of levels ({num_levels})"),
+            });
+        }
+        let coarsest = level_size(size, num_levels - 1);
+        if coarsest.width < MIN_LEVEL_SIDE_PX || coarsest.height < MIN_LEVEL_SIDE_PX {
+            return Err(Error::InvalidParameter {
+                name: "levels",
+                value: num_levels.to_string(),
+                expected: format!(
+                    "few enough levels that the coarsest of {size} is at least \
+                     {MIN_LEVEL_SIDE_PX}x{MIN_LEVEL_SIDE_PX} (it would be {coarsest})"
+                ),
+            });
+        }
+        let levels = (0..num_levels)
+            .map(|l| {
+                // Level 0 is only stored when it is used; otherwise the input is read directly.
+                let s = if l == 0 && finest_level > 0 {
+                    ImageSize::new(0, 0)
+                } else {
+                    level_size(size, l)
+                };
+                PyramidLevel {
+                    intrinsics: intrinsics.at_level(l as u32),
+                    gray: GrayF32::filled(s, 0.0),
+                    depth_m: DepthMeters::filled(s, 0.0),
+                    samples: if l >= finest_level {
+                        vec![TargetSample::default(); s.area()]
+                    } else {
+                        Vec::new()
+                    },
+                }
+            })
+            .collect();
+        Ok(Self {
+            size,
+            finest_level,
+            levels,
+        })
+    }
+
+    /// Input image size (level 0).
+    pub fn size(&self) -> ImageSize {
+        self.size
+    }
+
+    /// Number of levels (including unbuilt ones below the finest).
+    pub fn num_levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// The finest level that is built.
+    pub fn finest_level(&self) -> usize {
+        self.finest_level
+    }
+
+    /// Level `level`, or `None` when it is not built (below the finest level, or beyond the
+    /// coarsest).
+    pub fn level(&self, level: usize) -> Option<&PyramidLevel> {
+        if level < self.finest_level {
+            return None;
+        }
+        self.levels.get(level)
+    }
+
+    /// Rebuilds every level from a new frame, allocating nothing.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when `gray` or `depth_m` is not the pyramid's size.
+    pub fn build(&mut self, gray: &GrayF32, depth_m: &DepthMeters) -> Result<()> {
+        for (what, s) in [("pyramid gray", gray.size()), ("pyramid depth", depth_m.size())] {
+            if s != self.size {
+                return Err(Error::SizeMismatch {
+                    what: what.into(),
+                    expected: self.size,
+                    found: s,
+                });
+            }
+        }
+        if self.finest_level == 0 {
+            self.levels[0].gray.copy_from(gray)?;
+            self.levels[0].depth_m.copy_from(depth_m)?;
+        }
+        for l in 1..self.levels.len() {
+            let (finer, coarser) = self.levels.split_at_mut(l);
+            let dst = &mut coarser[0];
+            let (src_gray, src_depth) = if l == 1 && self.finest_level > 0 {
+                (gray, depth_m)
+            } else {
+                (&finer[l - 1].gray, &finer[l - 1].depth_m)
+            };
+            downsample_gray_into(src_gray, &mut dst.gray)?;
+            downsample_depth_into(src_depth, &mut dst.depth_m)?;
+        }
+        for level in self.levels.iter_mut().skip(self.finest_level) {
+            pack_samples_into(&level.gray, &level.depth_m, &mut level.samples)?;
+        }
+        Ok(())
+    }
+}
+
+fn check_half_size(what: &str, src: ImageSize, dst: ImageSize) -> Result<()> {
+    let expected = ImageSize::new(src.width / 2, src.height / 2);
+    if dst != expected {
+        return Err(Error::SizeMismatch {
+            what: what.into(),
+            expected,
+            found: dst,
+        });
+    }
+    Ok(())
+}
+
+/// 2×2 box mean of `src` into `dst` (half size, odd sides cropped).
+///
+/// # Errors
+/// [`Error::SizeMismatch`] when `dst` is not half of `src`.
+pub fn downsample_gray_into(src: &GrayF32, dst: &mut GrayF32) -> Result<()> {
+    check_half_size("downsample_gray_into", src.size(), dst.size())?;
+    let (sw, dw) = (src.width(), dst.width());
+    if dw == 0 {
+        return Ok(());
+    }
+    let src = src.as_slice();
+    dst.as_mut_slice()
+        .par_chunks_mut(dw * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(chunk, rows)| {
+            for (r, out) in rows.chunks_exact_mut(dw).enumerate() {
+                let y = chunk * ROWS_PER_TASK + r;
+                let a = &src[2 * y * sw..2 * y * sw + 2 * dw];
+                let b = &src[(2 * y + 1) * sw..(2 * y + 1) * sw + 2 * dw];
+                for (x, o) in out.iter_mut().enumerate() {
+                    *o = 0.25 * (a[2 * x] + a[2 * x + 1] + b[2 * x] + b[2 * x + 1]);
+                }
+            }
+        });
+    Ok(())
+}
+
+/// The edge-aware depth of one 2×2 block (see the module docs): mean of the valid children
+/// within [`DEPTH_EDGE_RELATIVE`] of the nearest valid child; 0 when no child is valid.
+#[inline]
+pub fn edge_aware_depth(children_m: [f32; 4]) -> f32 {
+    let mut nearest = f32::INFINITY;
+    for &z in &children_m {
+        if z > 0.0 && z < nearest {
+            nearest = z;
+        }
+    }
+    if !nearest.is_finite() {
+        return 0.0;
+    }
+    let limit = nearest * (1.0 + DEPTH_EDGE_RELATIVE);
+    let (mut sum, mut n) = (0.0f32, 0.0f32);
+    for &z in &children_m {
+        if z > 0.0 && z <= limit {
+            sum += z;
+            n += 1.0;
+        }
+    }
+    sum / n
+}
+
+/// Edge-aware 2×2 depth reduction of `src` into `dst` (half size), see [`edge_aware_depth`].
+/// Non-finite or negative input depths count as invalid.
+///
+/// # Errors
+/// [`Error::SizeMismatch`] when `dst` is not half of `src`.
+pub fn downsample_depth_into(src: &DepthMeters, dst: &mut DepthMeters) -> Result<()> {
+    check_half_size("downsample_depth_into", src.size(), dst.size())?;
+    let (sw, dw) = (src.width(), dst.width());
+    if dw == 0 {
+        return Ok(());
+    }
+    let src = src.as_slice();
+    let clean = |z: f32| if z.is_finite() && z > 0.0 { z } else { 0.0 };
+    dst.as_mut_slice()
+        .par_chunks_mut(dw * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(chunk, rows)| {
+            for (r, out) in rows.chunks_exact_mut(dw).enumerate() {
+                let y = chunk * ROWS_PER_TASK + r;
+                let a = &src[2 * y * sw..2 * y * sw + 2 * dw];
+                let b = &src[(2 * y + 1) * sw..(2 * y + 1) * sw + 2 * dw];
+                for (x, o) in out.iter_mut().enumerate() {
+                    *o = edge_aware_depth([
+                        clean(a[2 * x]),
+                        clean(a[2 * x + 1]),
+                        clean(b[2 * x]),
+                        clean(b[2 * x + 1]),
+                    ]);
+                }
+            }
+        });
+    Ok(())
+}
+
+/// Derivative of a 1-D signal at index `i` of `n` from its neighbours `prev`, `centre`,
+/// `next` (central difference, one-sided at the ends).
+#[inline]
+fn intensity_derivative(prev: f32, centre: f32, next: f32, i: usize, n: usize) -> f32 {
+    if n < 2 {
+        0.0
+    } else if i == 0 {
+        next - centre
+    } else if i + 1 == n {
+        centre - prev
+    } else {
+        0.5 * (next - prev)
+    }
+}
+
+/// Depth derivative at a valid centre from its neighbours (0 = invalid or outside): central
+/// difference when both neighbours are on the centre's surface, one-sided when only one is,
+/// NaN when neither is (isolated pixel or a ridge between two depth edges).
+#[inline]
+fn depth_derivative(prev: f32, centre: f32, next: f32) -> f32 {
+    let limit = DEPTH_EDGE_RELATIVE * centre;
+    let prev_ok = prev > 0.0 && (prev - centre).abs() <= limit;
+    let next_ok = next > 0.0 && (next - centre).abs() <= limit;
+    match (prev_ok, next_ok) {
+        (true, true) => 0.5 * (next - prev),
+        (false, true) => next - centre,
+        (true, false) => centre - prev,
+        (false, false) => f32::NAN,
+    }
+}
+
+/// Fills the packed per-pixel samples of one level (see [`TargetSample`]).
+///
+/// # Errors
+/// [`Error::SizeMismatch`] / [`Error::BufferLength`] when the sizes disagree.
+pub fn pack_samples_into(gray: &GrayF32, depth_m: &DepthMeters, samples: &mut [TargetSample]) -> Result<()> {
+    if depth_m.size() != gray.size() {
+        return Err(Error::SizeMismatch {
+            what: "pack_samples_into depth".into(),
+            expected: gray.size(),
+            found: depth_m.size(),
+        });
+    }
+    if samples.len() != gray.size().area() {
+        return Err(Error::BufferLength {
+            expected: gray.size().area(),
+            found: samples.len(),
+            size: gray.size(),
+        });
+    }
+    let (w, h) = (gray.width(), gray.height());
+    if w == 0 || h == 0 {
+        return Ok(());
+    }
+    let (g, d) = (gray.as_slice(), depth_m.as_slice());
+    let depth_at = |i: usize| {
+        let z = d[i];
+        if z.is_finite() && z > 0.0 {
+            z
+        } else {
+            0.0
+        }
+    };
+    samples
+        .par_chunks_mut(w * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(chunk, rows)| {
+            for (r, out) in rows.chunks_exact_mut(w).enumerate() {
+                let y = chunk * ROWS_PER_TASK + r;
+                let up = y.saturating_sub(1);
+                let down = (y + 1).min(h - 1);
+                for (x, s) in out.iter_mut().enumerate() {
+                    let i = y * w + x;
+                    let left = x.saturating_sub(1);
+                    let right = (x + 1).min(w - 1);
+                    let gx = intensity_derivative(g[y * w + left], g[i], g[y * w + right], x, w);
+                    let gy = intensity_derivative(g[up * w + x], g[i], g[down * w + x], y, h);
+                    let z = depth_at(i);
+                    let (zv, zx, zy) = if z > 0.0 {
+                        let zl = if x > 0 { depth_at(i - 1) } else { 0.0 };
+                        let zr = if x + 1 < w { depth_at(i + 1) } else { 0.0 };
+                        let zu = if y > 0 { depth_at(i - w) } else { 0.0 };
+                        let zd = if y + 1 < h { depth_at(i + w) } else { 0.0 };
+                        let zx = depth_derivative(zl, z, zr);
+                        let zy = depth_derivative(zu, z, zd);
+                        if zx.is_nan() || zy.is_nan() {
+                            (f32::NAN, f32::NAN, f32::NAN)
+                        } else {
+                            (z, zx, zy)
+                        }
+                    } else {
+                        (f32::NAN, f32::NAN, f32::NAN)
+                    };
+                    *s = TargetSample([g[i], gx, gy, zv, zx, zy, 0.0, 0.0]);
+                }
+            }
+        });
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::camera::presets;
+
+    fn ramp(size: ImageSize) -> (GrayF32, DepthMeters) {
+        let gray = GrayF32::from_fn(size, |x, y| (x as f32 * 0.01 + y as f32 * 0.002).fract());
+        let depth = DepthMeters::from_fn(size, |x, y| 1.0 + 0.001 * (x + y) as f32);
+        (gray, depth)
+    }
+
+    #[test]
+    fn level_sizes_crop_odd_sides_and_intrinsics_follow() {
+        let size = ImageSize::new(641, 481);
+        let p = ImagePyramid::new(size, presets::TUM_FR2, 4, 0).unwrap();
+        let expect = [(641, 481), (320, 240), (160, 120), (80, 60)];
+        for (l, &(w, h)) in expect.iter().enumerate() {
+            let lv = p.level(l).unwrap();
+            assert_eq!(lv.size(), ImageSize::new(w, h));
+            assert_eq!(lv.samples.len(), w * h);
+            assert_eq!(lv.intrinsics, presets::TUM_FR2.at_level(l as u32));
+        }
+        assert!(p.level(4).is_none());
+    }
+
+    #[test]
+    fn rejects_bad_parameters() {
+        let size = ImageSize::new(640, 480);
+        assert!(ImagePyramid::new(size, presets::TUM_FR2, 0, 0).is_err());
+        assert!(ImagePyramid::new(size, presets::TUM_FR2, 3, 3).is_err());
+        // 640 >> 7 = 5 < MIN_LEVEL_SIDE_PX.
+        assert!(ImagePyramid::new(size, presets::TUM_FR2, 8, 0).is_err());
+        let bad = PinholeIntrinsics::new(0.0, 1.0, 1.0, 1.0);
+        assert!(ImagePyramid::new(size, bad, 3, 0).is_err());
+        let mut p = ImagePyramid::new(size, presets::TUM_FR2, 3, 1).unwrap();
+        let (g, d) = ramp(ImageSize::new(320, 240));
+        assert!(matches!(p.build(&g, &d), Err(Error::SizeMismatch { .. })));
+    }
+
+    #[test]
+    fn gray_mean_is_preserved_and_constant_stays_constant() {
+        let size = ImageSize::new(128, 96);
+        let (gray, depth) = ramp(size);
+        let mut p = ImagePyramid::new(size, presets::TUM_FR2, 4, 0).unwrap();
+        p.build(&gray, &depth).unwrap();
+        let mean = |img: &GrayF32| {
+            img.as_slice().iter().map(|&v| f64::from(v)).sum::<f64>() / img.size().area() as f64
+        };
+        for l in 1..4 {
+            // Even sizes: every level's mean equals the input mean.
+            let m = mean(&p.level(l).unwrap().gray);
+            assert!((m - mean(&gray)).abs() < 1e-5, "level {l}: {m}");
+        }
+        let flat = GrayF32::filled(size, 0.37);
+        p.build(&flat, &depth).unwrap();
+        for l in 0..4 {
+            let lv = p.level(l).unwrap();
+            assert!(lv.gray.as_slice().iter().all(|&v| (v - 0.37).abs() < 1e-6));
+            assert!(lv
+                .samples
+                .iter()
+                .all(|s| s.0[TargetSample::GRAD_X] == 0.0 && s.0[TargetSample::GRAD_Y] == 0.0));
+        }
+    }
+
+    #[test]
+    fn depth_never_blends_across_an_edge() {
+        // Left half at 1 m, right half at 3 m, with an odd boundary so some 2x2 blocks straddle it.
+        let size = ImageSize::new(128, 96);
+        let depth = DepthMeters::from_fn(size, |x, _| if x < 67 { 1.0 } else { 3.0 });
+        let gray = GrayF32::filled(size, 0.5);
+        let mut p = ImagePyramid::new(size, presets::TUM_FR2, 4, 0).unwrap();
+        p.build(&gray, &depth).unwrap();
+        for l in 1..4 {
+            for &z in p.level(l).unwrap().depth_m.as_slice() {
+                assert!(z == 1.0 || z == 3.0, "level {l}: blended depth {z}");
+            }
+        }
+        assert_eq!(edge_aware_depth([1.0, 1.02, 0.0, 3.0]), 1.01);
+        assert_eq!(edge_aware_depth([0.0; 4]), 0.0);
+        assert_eq!(edge_aware_depth([0.0, 2.0, 0.0, 0.0]), 2.0);
+    }
+
+    #[test]
+    fn invalid_depth_stays_invalid_and_gradients_are_nan_there() {
+        let size = ImageSize::new(32, 32);
+        let depth = DepthMeters::from_fn(size, |x, y| if x < 16 && y < 16 { 0.0 } else { 2.0 });
+        let gray = GrayF32::filled(size, 0.5);
+        let mut p = ImagePyramid::new(size, presets::TUM_FR2, 2, 0).unwrap();
+        p.build(&gray, &depth).unwrap();
+        let l1 = p.level(1).unwrap();
+        assert_eq!(l1.depth_m.get(3, 3), 0.0);
+        assert_eq!(l1.depth_m.get(12, 12), 2.0);
+        let s = l1.samples[3 * 16 + 3];
+        assert!(s.0[TargetSample::DEPTH].is_nan() && s.0[TargetSample::DEPTH_GRAD_X].is_nan());
+        let s = l1.samples[12 * 16 + 12];
+        assert_eq!(s.0[TargetSample::DEPTH], 2.0);
+        assert_eq!(s.0[TargetSample::DEPTH_GRAD_X], 0.0);
+    }
+
+    #[test]
+    fn gradients_of_a_linear_ramp_are_exact() {
+        let size = ImageSize::new(40, 30);
+        let gray = GrayF32::from_fn(size, |x, y| 0.01 * x as f32 + 0.003 * y as f32);
+        let depth = DepthMeters::from_fn(size, |x, y| 2.0 + 0.004 * x as f32 - 0.002 * y as f32);
+        let mut p = ImagePyramid::new(size, presets::TUM_FR2, 2, 0).unwrap();
+        p.build(&gray, &depth).unwrap();
+        for l in 0..2 {
+            let scale = (1 << l) as f32;
+            for s in &p.level(l).unwrap().samples {
+                assert!((s.0[TargetSample::GRAD_X] - 0.01 * scale).abs() < 1e-5);
+                assert!((s.0[TargetSample::GRAD_Y] - 0.003 * scale).abs() < 1e-5);
+                assert!((s.0[TargetSample::DEPTH_GRAD_X] - 0.004 * scale).abs() < 1e-5);
+                assert!((s.0[TargetSample::DEPTH_GRAD_Y] + 0.002 * scale).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn skipping_level_zero_gives_identical_coarse_levels() {
+        let size = ImageSize::new(128, 96);
+        let (gray, depth) = ramp(size);
+        let mut full = ImagePyramid::new(size, presets::TUM_FR2, 3, 0).unwrap();
+        let mut skip = ImagePyramid::new(size, presets::TUM_FR2, 3, 1).unwrap();
+        full.build(&gray, &depth).unwrap();
+        skip.build(&gray, &depth).unwrap();
+        assert!(skip.level(0).is_none());
+        for l in 1..3 {
+            let (a, b) = (full.level(l).unwrap(), skip.level(l).unwrap());
+            assert_eq!(a.gray, b.gray);
+            assert_eq!(a.depth_m, b.depth_m);
+        }
+    }
+}
