@@ -145,8 +145,13 @@ pub struct FrameOutput<'a> {
 }
 
 enum MotionSource {
-    Dvo { tracker: Box<DvoTracker>, closed_loop: bool },
-    External { marker_from_camera: Isometry3<f64> },
+    Dvo {
+        tracker: Box<DvoTracker>,
+        closed_loop: bool,
+    },
+    External {
+        marker_from_camera: Isometry3<f64>,
+    },
 }
 
 /// Per-sequence processor (see the module docs).
@@ -229,7 +234,10 @@ impl Processor {
             MotionSource::External { marker_from_camera } => {
                 let world_from_marker = frame.world_from_marker.ok_or_else(|| Error::InvalidParameter {
                     name: "world_from_marker",
-                    value: format!("missing for frame {} (t = {} ns)", self.frames, frame.timestamp_ns),
+                    value: format!(
+                        "missing for frame {} (t = {} ns)",
+                        self.frames, frame.timestamp_ns
+                    ),
                     expected: "an external pose for every frame with PoseSource::External".into(),
                 })?;
                 let finite = world_from_marker.translation.vector.iter().all(|v| v.is_finite())

@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use nalgebra::Isometry3;
 
+use crate::dvo::{DvoConfig, DvoStatus};
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
@@ -27,6 +28,7 @@ use crate::mcap_io::input::decode::{
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
 use crate::mcap_io::input::{McapInput, RawMessage};
 use crate::mcap_io::DEPTH_UNITS_KEY;
+use crate::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
 use crate::time::split_ns;
 use crate::trajectory::{interpolate, StampedPose};
 
@@ -686,18 +688,89 @@ impl FrameLoop {
     }
 }
 
-/// The production [`ProcessorFactory`]: the per-sequence pipeline (DVO + detector).
-///
-/// # Errors
-/// Until the pipeline is merged into this branch: always [`Error::InvalidParameter`].
+/// The per-sequence pipeline ([`crate::pipeline::Processor`]: DVO + detector) behind
+/// [`FrameProcessor`].
+pub struct PipelineProcessor {
+    processor: Processor,
+    mode: PoseMode,
+    keep_accumulation: bool,
+}
+
+impl PipelineProcessor {
+    /// A pipeline for `mode` with default DVO and detector parameters (algorithm.md §2).
+    /// `keep_accumulation` copies the accumulation map into every [`ProcessedFrame`].
+    ///
+    /// # Errors
+    /// Invalid intrinsics or image size, as [`Processor::new`].
+    pub fn new(
+        intrinsics: PinholeIntrinsics,
+        size: ImageSize,
+        mode: PoseMode,
+        keep_accumulation: bool,
+    ) -> Result<Self> {
+        let dvo = DvoConfig::default();
+        let pose_source = match mode {
+            PoseMode::Dvo => PoseSource::DvoClosedLoop(dvo),
+            PoseMode::DvoUnmasked => PoseSource::DvoUnmasked(dvo),
+            PoseMode::External => PoseSource::External {
+                camera_from_marker: None,
+            },
+        };
+        let config = ProcessorConfig {
+            pose_source,
+            ..ProcessorConfig::default()
+        };
+        Ok(Self {
+            processor: Processor::new(size, intrinsics, config)?,
+            mode,
+            keep_accumulation,
+        })
+    }
+}
+
+fn dvo_status_name(status: &DvoStatus) -> String {
+    match status {
+        DvoStatus::Converged => "converged".into(),
+        DvoStatus::Failed(reason) => format!("failed: {reason:?}"),
+    }
+}
+
+impl FrameProcessor for PipelineProcessor {
+    fn process(&mut self, frame: &RgbdFrame<'_>) -> Result<ProcessedFrame> {
+        let out = self.processor.process(&FrameInput {
+            timestamp_ns: frame.timestamp_ns,
+            gray: frame.gray,
+            depth_m: frame.depth_m,
+            world_from_marker: frame.world_from_camera.as_ref(),
+        })?;
+        let (dvo_status, dvo_iterations, dvo_cost) = match (&out.stats.dvo, self.mode) {
+            (_, PoseMode::External) => ("external".to_owned(), 0, 0.0),
+            (Some(d), _) => (
+                dvo_status_name(&d.status),
+                d.iterations_per_level.iter().sum(),
+                d.final_cost,
+            ),
+            (None, _) => ("first_frame".to_owned(), 0, 0.0),
+        };
+        Ok(ProcessedFrame {
+            mask: out.mask.clone(),
+            world_from_camera: out.world_from_camera,
+            accumulation: self.keep_accumulation.then(|| out.accumulation_m.clone()),
+            dvo_status,
+            dvo_iterations,
+            dvo_cost,
+        })
+    }
+}
+
+/// The production [`ProcessorFactory`]: a [`PipelineProcessor`] per file.
 pub fn pipeline_factory(
-    _intrinsics: PinholeIntrinsics,
-    _size: ImageSize,
-    _mode: PoseMode,
-) -> Result<Box<dyn FrameProcessor>> {
-    Err(Error::InvalidParameter {
-        name: "pipeline",
-        value: "missing".into(),
-        expected: "a build with the DVO + detector pipeline".into(),
-    })
+    keep_accumulation: bool,
+) -> impl FnMut(PinholeIntrinsics, ImageSize, PoseMode) -> Result<Box<dyn FrameProcessor>> {
+    move |intrinsics, size, mode| {
+        Ok(
+            Box::new(PipelineProcessor::new(intrinsics, size, mode, keep_accumulation)?)
+                as Box<dyn FrameProcessor>,
+        )
+    }
 }

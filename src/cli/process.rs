@@ -353,7 +353,7 @@ fn run_one(
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --export-masks {}", dir.display()))?;
     }
-    let mut factory = occmask::process::pipeline_factory;
+    let mut factory = occmask::process::pipeline_factory(args.accumulation);
     let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
         .with_context(|| format!("processing {}", job.input.display()))?;
     let file = sink
