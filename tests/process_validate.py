@@ -1,0 +1,94 @@
+"""Reads an `occmask process` output with the official Python readers.
+
+usage: python process_validate.py FILE FRAMES
+
+Decodes every message: protobuf channels with mcap-protobuf-support, ROS 2 cdr channels with
+mcap-ros2-support, json channels with json.loads. Checks: summary present; log times
+non-decreasing; FRAMES messages on /occmask/mask, /occmask/mask_annotations, /occmask/odometry
+and /occmask/stats; masks mono8 0/255 with the colour frame; annotations with translucent fill
+and the mask's stamp; unit quaternions; stats fields of schemas/occmask.FrameStats.json.
+Prints one JSON line with per-topic counts; exits 1 on any failure.
+"""
+
+import json
+import sys
+
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
+
+def fail(msg):
+    print(f"FAIL: {msg}", file=sys.stderr)
+    sys.exit(1)
+
+
+def ns(ts):
+    return ts.seconds * 1_000_000_000 + ts.nanos
+
+
+def main():
+    path, frames = sys.argv[1], int(sys.argv[2])
+    factories = [ProtobufDecoderFactory(), Ros2DecoderFactory()]
+    decoders = {}
+    counts = {}
+    mask_stamps = []
+    annotation_stamps = []
+    last = 0
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        if summary is None:
+            fail("no summary section")
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            topic = channel.topic
+            counts[topic] = counts.get(topic, 0) + 1
+            if message.log_time < last:
+                fail(f"{topic}: log time {message.log_time} before {last}")
+            last = message.log_time
+            if channel.message_encoding == "json":
+                decoded = json.loads(message.data)
+            else:
+                key = channel.id
+                if key not in decoders:
+                    for factory in factories:
+                        d = factory.decoder_for(channel.message_encoding, schema)
+                        if d is not None:
+                            decoders[key] = d
+                            break
+                    else:
+                        fail(f"{topic}: no decoder for {channel.message_encoding}")
+                decoded = decoders[key](message.data)
+            if topic == "/occmask/mask":
+                if decoded.encoding != "mono8" or set(decoded.data) - {0, 255}:
+                    fail("mask not mono8 0/255")
+                if len(decoded.data) != decoded.width * decoded.height:
+                    fail("mask size")
+                mask_stamps.append(ns(decoded.timestamp))
+            elif topic == "/occmask/mask_annotations":
+                annotation_stamps.append(ns(decoded.timestamp))
+                for p in decoded.points:
+                    if p.type != 2 or not (0 < p.fill_color.a < 1) or len(p.points) < 3:
+                        fail("annotation polygon")
+            elif topic == "/occmask/odometry":
+                q = decoded.pose.orientation
+                if abs(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w - 1) > 1e-9 or decoded.frame_id != "world":
+                    fail("odometry pose")
+            elif topic == "/occmask/stats":
+                for key in ("timestamp", "frame_index", "pose_source", "dvo_status", "dvo_iterations",
+                            "dvo_cost", "moving_fraction", "moving_pixels", "decode_ms", "process_ms"):
+                    if key not in decoded:
+                        fail(f"stats without {key}")
+        stats = summary.statistics
+        if stats is not None and stats.message_count != sum(counts.values()):
+            fail(f"statistics say {stats.message_count} messages, read {sum(counts.values())}")
+    for topic in ("/occmask/mask", "/occmask/mask_annotations", "/occmask/odometry", "/occmask/stats"):
+        if counts.get(topic, 0) != frames:
+            fail(f"{topic}: expected {frames} messages, found {counts.get(topic, 0)}")
+    if mask_stamps != annotation_stamps:
+        fail("annotation stamps differ from mask stamps")
+    print(json.dumps(counts, sort_keys=True))
+
+
+if __name__ == "__main__":
+    main()
