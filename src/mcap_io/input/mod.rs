@@ -154,9 +154,16 @@ fn read_profile(file: &mut File, path: &Path) -> Result<String> {
     file.seek(SeekFrom::Start(0))
         .map_err(|e| Error::io("cannot seek in MCAP file", path, e))?;
     let mut prefix = [0u8; MAGIC_BYTES + RECORD_PREFIX_BYTES];
-    file.read_exact(&mut prefix)
-        .map_err(|e| Error::io("cannot read MCAP header", path, e))?;
-    if &prefix[..MAGIC_BYTES] != mcap::MAGIC {
+    let mut filled = 0;
+    while filled < prefix.len() {
+        match file.read(&mut prefix[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Error::io("cannot read MCAP header", path, e)),
+        }
+    }
+    if filled < prefix.len() || &prefix[..MAGIC_BYTES] != mcap::MAGIC {
         return Err(mcap_error(
             path,
             "not an MCAP file (expected the magic bytes \\x89MCAP0\\r\\n at the start)",

@@ -1,0 +1,189 @@
+//! `occmask process` through the binary, with the real pipeline: batches where one file fails,
+//! overwrite and input-as-output refusals, exports, determinism and external poses.
+
+#![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
+
+mod process_support;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use occmask::image_buf::ImageSize;
+use process_support::*;
+
+/// Big enough for the DVO pyramid, small enough to be quick.
+fn spec() -> FixtureSpec {
+    FixtureSpec {
+        size: ImageSize::new(160, 120),
+        frames: 8,
+        ..Default::default()
+    }
+}
+
+fn fixture(dir: &Path, name: &str, flavor: Flavor) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, fixture_bytes(flavor, &spec())).unwrap();
+    path
+}
+
+fn occmask<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn one_failing_file_does_not_stop_the_others() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Protobuf);
+    let b = fixture(dir.path(), "b.mcap", Flavor::Ros2);
+    let junk = dir.path().join("junk.mcap");
+    std::fs::write(&junk, b"not an mcap file").unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        junk.as_os_str(),
+        b.as_os_str(),
+        "--out-dir".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("1 of 3 files failed"), "{err}");
+    assert!(
+        err.contains("junk.mcap") && err.contains("not an MCAP file"),
+        "{err}"
+    );
+    assert!(err.contains("frames"), "summary table missing: {err}");
+    assert_eq!(files_in(&out_dir), vec!["a.occmask.mcap", "b.occmask.mcap"]);
+    let eval = occmask(&["eval".as_ref(), out_dir.join("b.occmask.mcap").as_os_str()]);
+    assert!(eval.status.success(), "{}", stderr(&eval));
+}
+
+#[test]
+fn refuses_overwrite_and_writing_over_an_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Json);
+    let out_path = dir.path().join("out.mcap");
+    std::fs::write(&out_path, b"precious").unwrap();
+    let run = |extra: &[&str], output: &Path| {
+        let mut args: Vec<std::ffi::OsString> =
+            vec!["process".into(), a.clone().into(), "-o".into(), output.into()];
+        args.extend(extra.iter().map(|s| s.into()));
+        args.push("-q".into());
+        occmask(&args)
+    };
+    let out = run(&[], &out_path);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--force"), "{}", stderr(&out));
+    assert_eq!(std::fs::read(&out_path).unwrap(), b"precious");
+
+    let out = run(&["--force"], &a);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("different from the input"),
+        "{}",
+        stderr(&out)
+    );
+
+    let out = run(&["--force"], &out_path);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_ne!(std::fs::read(&out_path).unwrap(), b"precious");
+    // No temporary files left behind.
+    assert_eq!(files_in(dir.path()), vec!["a.mcap", "out.mcap"]);
+
+    // -o with several inputs is a usage error.
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        out_path.as_os_str(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--out-dir"), "{}", stderr(&out));
+}
+
+#[test]
+fn exports_are_written_and_output_bytes_are_deterministic() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Protobuf);
+    let masks = dir.path().join("masks");
+    let traj = dir.path().join("traj.txt");
+    let x = dir.path().join("x.mcap");
+    let y = dir.path().join("y.mcap");
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        x.as_os_str(),
+        "--export-trajectory".as_ref(),
+        traj.as_os_str(),
+        "--export-masks".as_ref(),
+        masks.as_os_str(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let text = std::fs::read_to_string(&traj).unwrap();
+    let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+    assert_eq!(lines.len(), 8);
+    for l in &lines {
+        assert!(occmask::trajectory::parse_tum_line(l).is_ok(), "{l}");
+    }
+    let pngs = files_in(&masks);
+    assert_eq!(pngs.len(), 8);
+    assert_eq!(pngs[0], "1700000000.000000.png");
+    assert_eq!(pngs[1], "1700000000.033333333.png");
+    let png = image::open(masks.join(&pngs[3])).unwrap().into_luma8();
+    assert_eq!((png.width(), png.height()), (160, 120));
+
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        y.as_os_str(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        std::fs::read(&x).unwrap() == std::fs::read(&y).unwrap(),
+        "two runs differ"
+    );
+}
+
+#[test]
+fn external_poses_give_zero_odometry_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Ros2);
+    let x = dir.path().join("x.mcap");
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        x.as_os_str(),
+        "--pose-topic".as_ref(),
+        GT_TOPIC.as_ref(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let eval = occmask(&["eval".as_ref(), "--json".as_ref(), x.as_os_str()]);
+    let v: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
+    let rmse = v["odometry"]["rpe"][0]["translation_rmse_m"].as_f64().unwrap();
+    assert!(rmse < 1e-9, "{v}");
+}
