@@ -1,0 +1,72 @@
+//! End-to-end `process` throughput, MCAP in → MCAP out with DVO (closed loop) + detector at
+//! 640×480, on ../shared/data/tum_fr2_desk_50 converted to MCAP in memory first: one file, and
+//! two files in parallel (rayon across files, as `occmask process a b` does) to show scaling.
+//!
+//! `cargo bench --bench process`; throughput is in frames (elements/s = frames per second).
+//! tools/bench_process.sh measures the binary end to end on a generated ≥ 2 GB file (peak RSS).
+
+use std::io::{Cursor, Write};
+use std::path::PathBuf;
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use occmask::convert::{convert_sequence, resolve_intrinsics, ConvertConfig, DEFAULT_BATCH_EVENTS};
+use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
+use occmask::mcap_io::input::McapInput;
+use occmask::mcap_io::McapWriteOptions;
+use occmask::process::{pipeline_factory, process_file, NoHooks, ProcessConfig};
+
+/// Criterion's minimum sample count: one iteration processes 50 VGA frames.
+const SAMPLES: usize = 10;
+
+fn process_once(input: &McapInput) -> u64 {
+    let mut factory = pipeline_factory(false);
+    let (_, report) = process_file(
+        input,
+        Cursor::new(Vec::with_capacity(64 << 20)),
+        &ProcessConfig::default(),
+        &mut factory,
+        &mut NoHooks,
+    )
+    .expect("process must succeed");
+    report.frames
+}
+
+fn bench_process(c: &mut Criterion) {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/tum_fr2_desk_50");
+    if !root.is_dir() {
+        eprintln!("skipping the process benchmark: {} is missing", root.display());
+        return;
+    }
+    let seq = dataset::tum::load(&root, DatasetKind::Tum).expect("tum_fr2_desk_50 must load");
+    let config = ConvertConfig {
+        intrinsics: resolve_intrinsics(DatasetKind::Tum, &seq.name, None).expect("fr2 preset"),
+        depth_units_per_meter: dataset::TUM_DEPTH_UNITS_PER_METER,
+        max_pair_gap_ns: DEFAULT_MAX_PAIR_GAP_NS,
+        keep_unpaired: false,
+        write: McapWriteOptions::default(),
+        batch_events: DEFAULT_BATCH_EVENTS,
+        command_line: "bench".into(),
+    };
+    let (cursor, _) =
+        convert_sequence(&seq, &config, Cursor::new(Vec::new()), &mut |_, _| {}).expect("convert");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("desk.mcap");
+    std::fs::File::create(&path)
+        .and_then(|mut f| f.write_all(cursor.get_ref()))
+        .expect("write the converted file");
+    let input = McapInput::open(&path).expect("open");
+    let frames = process_once(&input);
+
+    let mut group = c.benchmark_group("process_tum_fr2_desk_50");
+    group.sample_size(SAMPLES);
+    group.throughput(Throughput::Elements(frames));
+    group.bench_function("one_file", |b| b.iter(|| process_once(&input)));
+    group.throughput(Throughput::Elements(2 * frames));
+    group.bench_function("two_files_parallel", |b| {
+        b.iter(|| rayon::join(|| process_once(&input), || process_once(&input)))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_process);
+criterion_main!(benches);
