@@ -185,6 +185,8 @@ pub struct ProcessReport {
     pub copied_messages: u64,
     /// New messages written.
     pub new_messages: u64,
+    /// The input ended early (unfinished recording); everything readable was used.
+    pub input_truncated: bool,
     /// The estimated trajectory (colour stamps).
     pub trajectory: Vec<StampedPose>,
 }
@@ -456,6 +458,7 @@ pub fn process_file<W: Write + Seek>(
             outside_pose_stream: 0,
             copied_messages: 0,
             new_messages: 0,
+            input_truncated: input.is_truncated(),
             trajectory: Vec::new(),
         },
     };

@@ -453,3 +453,32 @@ fn errors_name_what_to_fix() {
     let err = run(&junk, &ProcessConfig::default()).unwrap_err().to_string();
     assert!(err.contains("not an MCAP file"), "{err}");
 }
+
+#[test]
+fn truncated_recording_is_read_up_to_its_last_complete_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let full = fixture_bytes(Flavor::Protobuf, &FixtureSpec::default());
+    let path = dir.path().join("cut.mcap");
+    // A recorder killed mid-write: no summary, no footer, the last chunk incomplete.
+    std::fs::write(&path, &full[..full.len() * 7 / 10]).unwrap();
+    let input = McapInput::open(&path).unwrap();
+    assert!(!input.is_indexed());
+    assert!(input.is_truncated());
+    let (bytes, report) = run(&path, &ProcessConfig::default()).unwrap();
+    assert!(report.input_truncated);
+    assert!(report.frames >= 3 && report.frames < 12, "{}", report.frames);
+    // Every message that was readable is in the output, unchanged.
+    let mut readable = 0;
+    input
+        .for_each_message(None, None, |m| {
+            readable += 1;
+            let _ = m;
+            Ok(true)
+        })
+        .unwrap();
+    assert_eq!(report.copied_messages, readable);
+    assert!(
+        mcap::Summary::read(&bytes).unwrap().is_some(),
+        "the output is a complete file"
+    );
+}

@@ -458,8 +458,14 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         print_summary(&results, &jobs);
     }
     for r in &results {
-        if let Err(e) = &r.outcome {
-            eprintln!("error: {}: {e}", r.input.display());
+        match &r.outcome {
+            Err(e) => eprintln!("error: {}: {e}", r.input.display()),
+            Ok((rep, _)) if rep.input_truncated && !globals.quiet => eprintln!(
+                "warning: {} ends early (unfinished recording): processed and copied everything up to \
+                 its last complete record; `pymcap-cli recover` can rebuild its index",
+                r.input.display()
+            ),
+            Ok(_) => {}
         }
     }
     if failed > 0 {

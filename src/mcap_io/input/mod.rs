@@ -109,6 +109,7 @@ pub struct McapInput {
     linear_extras: Vec<ExtraRecord>,
     /// First message of each supported channel, collected by the linear scan.
     linear_first: BTreeMap<u16, RawMessage>,
+    truncated: bool,
     file_len: u64,
 }
 
@@ -185,12 +186,19 @@ fn read_profile(file: &mut File, path: &Path) -> Result<String> {
     }
 }
 
-/// Drives a [`LinearReader`] over a file, calling `f` for every record.
-fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> Result<()> {
+/// Drives a [`LinearReader`] over a file, calling `f` for every record. A file that ends
+/// early (a recorder killed mid-write) is read up to its last complete record and reported
+/// with `Ok(true)` ("truncated"); other errors are errors.
+fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> Result<bool> {
     let mut file = BufReader::with_capacity(READ_BUFFER_BYTES, open_file(path)?);
     let mut reader = LinearReader::new();
     while let Some(event) = reader.next_event() {
-        match event? {
+        let event = match event {
+            Ok(e) => e,
+            Err(mcap::McapError::UnexpectedEof) => return Ok(true),
+            Err(e) => return Err(e.into()),
+        };
+        match event {
             LinearReadEvent::ReadRequest(n) => {
                 let read = file
                     .read(reader.insert(n))
@@ -200,7 +208,7 @@ fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> R
             LinearReadEvent::Record { data, opcode } => f(mcap::parse_record(opcode, data)?)?,
         }
     }
-    Ok(())
+    Ok(false)
 }
 
 impl McapInput {
@@ -230,6 +238,7 @@ impl McapInput {
             channels: BTreeMap::new(),
             linear_extras: Vec::new(),
             linear_first: BTreeMap::new(),
+            truncated: false,
             file_len,
         };
         if let Some(summary) = &input.summary {
@@ -262,7 +271,7 @@ impl McapInput {
         let mut extras = Vec::new();
         let mut first = BTreeMap::new();
         let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
-        linear_records(&path, |record| {
+        self.truncated = linear_records(&path, |record| {
             match record {
                 Record::Schema { header, data } => {
                     schemas.insert(
@@ -346,6 +355,12 @@ impl McapInput {
     /// The header's profile (`ros2`, empty, ...).
     pub fn profile(&self) -> &str {
         &self.profile
+    }
+
+    /// True when the file ends before its end magic (an unfinished recording): everything up
+    /// to the last complete record is read.
+    pub fn is_truncated(&self) -> bool {
+        self.truncated
     }
 
     /// True when messages are read through the summary's indexes (log-time order).
@@ -466,7 +481,7 @@ impl McapInput {
         let in_range = |t: u64| time_range.is_none_or(|(s, e)| t >= s && t < e);
         let Some(summary) = &self.summary else {
             let mut stopped = false;
-            return linear_records(&self.path, |record| {
+            linear_records(&self.path, |record| {
                 if stopped {
                     return Ok(());
                 }
@@ -482,7 +497,8 @@ impl McapInput {
                     }
                 }
                 Ok(())
-            });
+            })?;
+            return Ok(());
         };
         let mut options = IndexedReaderOptions::new().with_order(ReadOrder::LogTime);
         if let Some(topics) = topics {
