@@ -29,21 +29,30 @@ fn main() -> anyhow::Result<()> {
         "/camera/depth/image",
         "/camera/rgb/camera_info",
     ];
-    // Per frame: the three messages' bytes, in colour-stamp order.
-    let mut frames: BTreeMap<u64, Vec<(String, Vec<u8>)>> = BTreeMap::new();
+    // Colour, depth and colour calibration messages in time order; a converted file holds pairs
+    // only, so the k-th messages of the three topics form frame k.
+    let mut streams: BTreeMap<&str, Vec<(String, Vec<u8>)>> = BTreeMap::new();
     let names: Vec<String> = topics.iter().map(|s| s.to_string()).collect();
     input.for_each_message(Some(&names), None, |m| {
         let channel = &input.channels()[&m.header.channel_id];
+        let topic = topics
+            .iter()
+            .find(|t| **t == channel.topic)
+            .copied()
+            .unwrap_or_default();
         let key = format!("{}|{}", channel.topic, channel.schema_name);
-        frames.entry(m.header.log_time).or_default().push((key, m.data));
+        streams.entry(topic).or_default().push((key, m.data));
         Ok(true)
     })?;
-    let frames: Vec<Vec<(String, Vec<u8>)>> = frames.into_values().filter(|f| f.len() == 3).collect();
+    let count = streams.values().map(Vec::len).min().unwrap_or(0);
     anyhow::ensure!(
-        frames.len() >= 2,
-        "need at least 2 complete frames in {}",
+        streams.len() == 3 && count >= 2,
+        "need colour, depth and calibration messages in {}",
         args[1]
     );
+    let frames: Vec<Vec<(String, Vec<u8>)>> = (0..count)
+        .map(|k| topics.iter().map(|t| streams[t][k].clone()).collect())
+        .collect();
 
     let out = BufWriter::with_capacity(8 << 20, std::fs::File::create(&args[2])?);
     let mut w = mcap::WriteOptions::new()
