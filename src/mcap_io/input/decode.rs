@@ -659,7 +659,9 @@ pub fn depth_from_image_into(
     units_per_meter: f64,
     depth_m: &mut DepthMeters,
 ) -> Result<()> {
-    let scale = (1.0 / units_per_meter) as f32;
+    // The same scaling as `image_buf::depth_m_from_u16_into`, so decoded MCAP depth equals
+    // depth read from dataset files bit for bit.
+    let scale = 1.0 / units_per_meter as f32;
     match &msg.payload {
         ImagePayload::Raw {
             width,
@@ -773,7 +775,13 @@ mod tests {
         let mut b = a.clone();
         depth_from_image_into(&raw("16UC1", 2, 2, mm), "/d", 1000.0, &mut a).unwrap();
         depth_from_image_into(&raw("32FC1", 2, 4, m), "/d", 1000.0, &mut b).unwrap();
-        assert_eq!(a.as_slice(), &[1.5, 0.0]);
+        let mut reference = DepthMeters::filled(ImageSize::new(2, 1), 0.0);
+        crate::image_buf::depth_m_from_u16_into(&[1500, 0], 1000.0, &mut reference).unwrap();
+        assert_eq!(
+            a, reference,
+            "16UC1 must match the dataset reader's scaling exactly"
+        );
+        assert!((a.get(0, 0) - 1.5).abs() < 1e-6 && a.get(1, 0) == 0.0);
         assert_eq!(b.as_slice(), &[1.5, 0.0]);
     }
 
