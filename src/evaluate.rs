@@ -311,10 +311,14 @@ pub fn format_report(report: &EvalReport) -> String {
                 "  segmentation           {} frames matched, {} with moving objects\n",
                 s.matched_frames, s.frames_with_truth
             ));
-            out.push_str(&format!(
-                "    F1 / precision / recall   {:.3} / {:.3} / {:.3}\n",
-                s.mean_f1, s.mean_precision, s.mean_recall
-            ));
+            if s.frames_with_truth > 0 {
+                out.push_str(&format!(
+                    "    F1 / precision / recall   {:.3} / {:.3} / {:.3}\n",
+                    s.mean_f1, s.mean_precision, s.mean_recall
+                ));
+            } else {
+                out.push_str("    F1                         n/a: no frame with moving objects\n");
+            }
             if s.empty_truth_frames > 0 {
                 out.push_str(&format!(
                     "    static frames              {} (mean false-positive fraction {:.4})\n",
