@@ -87,7 +87,8 @@ pub struct DvoConfig {
     /// A level ends when λ exceeds this.
     pub lm_lambda_max: f64,
     /// A level ends after a step whose largest twist component is below this (metres for
-    /// translation, radians for rotation).
+    /// translation, radians for rotation) on the finest level; coarser levels use
+    /// 2^(level − finest_level) times this.
     pub step_tolerance: f64,
     /// Bi-square threshold of the photometric residual (gray units, [0, 1]).
     pub k_intensity: IntensityThreshold,
@@ -570,12 +571,18 @@ impl DvoEstimator {
             };
             let cost = cfg.cost_at_level(l);
             let mut level_pose = pose;
+            // A coarse level only has to bring the pose into the next level's basin, and its
+            // pixels are 2^(l − finest) times larger: its step tolerance is that much looser.
+            let level_schedule = LmSchedule {
+                step_tolerance: schedule.step_tolerance * f64::from(1u32 << (l - cfg.finest_level)),
+                ..schedule
+            };
             match solver::optimize_level(
                 points,
                 level.size().width,
                 &target,
                 &cost,
-                &schedule,
+                &level_schedule,
                 &mut level_pose,
             ) {
                 Ok(res) => {
