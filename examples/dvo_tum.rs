@@ -36,6 +36,7 @@ fn main() -> anyhow::Result<()> {
                 config.max_iterations_per_level = args.next().unwrap_or_default().parse()?
             }
             "--step-tolerance" => config.step_tolerance = args.next().unwrap_or_default().parse()?,
+            "--min-gradient" => config.min_gradient_per_px = args.next().unwrap_or_default().parse()?,
             "--lambda0" => config.lm_lambda_initial = args.next().unwrap_or_default().parse()?,
             "--init-previous" => config.init_from_previous_motion = true,
             "--profile" => {

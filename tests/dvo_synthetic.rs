@@ -116,7 +116,26 @@ fn textureless_planar_frames_fail_without_nan() {
     .intrinsics();
     let gray = GrayF32::filled(size, 0.5);
     let depth = DepthMeters::filled(size, 2.0);
+    // Default config: the gradient threshold leaves no reference pixel at all.
     let mut tracker = DvoTracker::new(size, k, DvoConfig::paper()).unwrap();
+    let est = tracker
+        .estimate_between((&gray, &depth), (&gray, &depth), None, None)
+        .unwrap();
+    assert!(
+        matches!(
+            est.status,
+            DvoStatus::Failed(DvoFailure::TooFewPixels { found: 0, .. })
+        ),
+        "{:?}",
+        est.status
+    );
+    assert_finite(&est.current_from_reference);
+    // Every pixel used: the depth of one plane constrains only 3 of the 6 directions.
+    let all_pixels = DvoConfig {
+        min_gradient_per_px: 0.0,
+        ..DvoConfig::paper()
+    };
+    let mut tracker = DvoTracker::new(size, k, all_pixels).unwrap();
     let est = tracker
         .estimate_between((&gray, &depth), (&gray, &depth), None, None)
         .unwrap();
