@@ -15,6 +15,7 @@ pub mod error;
 pub mod geometry;
 pub mod image_buf;
 pub mod mcap_io;
+pub mod synthetic;
 pub mod time;
 pub mod trajectory;
 
