@@ -482,3 +482,21 @@ fn jpeg_colour_passes_through_unchanged() {
     }
     assert_eq!(n, 5);
 }
+
+#[test]
+fn icsl_uses_millimetres_and_the_icsl_camera() {
+    let c = tum_case();
+    let out = convert("icsl", &c.dir, &c.out, &["-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let reader = McapFileReader::open(&c.out).unwrap();
+    let md = &reader.metadata().unwrap()[0].metadata;
+    assert_eq!(md["dataset_kind"], "icsl");
+    assert_eq!(md["depth_units_per_meter"], "1000");
+    assert_eq!(md["intrinsics_fx_fy_cx_cy"], "537.6,539,316.1,245.5");
+    let depth = reader
+        .channels()
+        .into_iter()
+        .find(|ch| ch.topic == TOPIC_DEPTH_IMAGE)
+        .unwrap();
+    assert_eq!(depth.metadata["depth_units_per_meter"], "1000");
+}
