@@ -171,7 +171,11 @@ fn bad_missing_list_file_or_directory() {
     let c = tum_case();
     std::fs::remove_file(c.dir.join("depth.txt")).unwrap();
     let out = convert("tum", &c.dir, &c.out, &[]);
-    assert_fails(&out, &c.out, &["expected depth.txt", "depth.txt"]);
+    assert_fails(
+        &out,
+        &c.out,
+        &["expected depth.txt", "depth.txt", "use `occmask convert larr`"],
+    );
 
     let tmp = tempfile::tempdir().unwrap();
     let larr = tmp.path().join("larr");

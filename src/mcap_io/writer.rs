@@ -317,7 +317,21 @@ impl<W: Write + Seek> RgbdMcapWriter<W> {
         timestamp_ns: u64,
         world_from_camera: &Isometry3<f64>,
     ) -> Result<()> {
-        let msg = codec::pose_in_frame(timestamp_ns, FRAME_WORLD, world_from_camera);
+        self.write_pose_in_frame(topic, timestamp_ns, FRAME_WORLD, world_from_camera)
+    }
+
+    /// Writes `frame_from_body` as `foxglove.PoseInFrame` in `frame_id` (e.g. an odometry frame).
+    ///
+    /// # Errors
+    /// As [`Self::write_color_compressed`].
+    pub fn write_pose_in_frame(
+        &mut self,
+        topic: &str,
+        timestamp_ns: u64,
+        frame_id: &str,
+        frame_from_body: &Isometry3<f64>,
+    ) -> Result<()> {
+        let msg = codec::pose_in_frame(timestamp_ns, frame_id, frame_from_body);
         self.write_message(topic, MessageKind::PoseInFrame, timestamp_ns, &msg)
     }
 
