@@ -421,6 +421,13 @@ pub fn convert_sequence<W: Write + Seek>(
         }
         Ok(())
     })?;
+    if done != total {
+        // Only reachable if the reader thread stopped without reporting an error.
+        return Err(Error::Dataset {
+            path: seq.root.clone(),
+            message: format!("conversion stopped after {done} of {total} images and poses"),
+        });
+    }
     report.image_size = expected_size.unwrap_or_default();
 
     let first_ns = events

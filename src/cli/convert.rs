@@ -108,9 +108,9 @@ pub struct LarrArgs {
 /// Chunk compression choices.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum CompressionArg {
-    /// zstd: smallest files.
+    /// Smallest files.
     Zstd,
-    /// lz4: faster, larger.
+    /// Faster, larger.
     Lz4,
     /// No compression.
     None,
