@@ -1,6 +1,7 @@
 //! `occmask convert`: dataset folder → MCAP.
 
 use std::io::{BufWriter, IsTerminal};
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -235,6 +236,11 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let mut progress = |done: usize, total: usize| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
+        if super::signals::interrupted() {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
     };
     let result = convert_sequence(&seq, &config, BufWriter::new(file), &mut progress);
     bar.finish_and_clear();
