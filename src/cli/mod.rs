@@ -5,6 +5,7 @@
 //! one match arm in [`run`].
 
 pub mod convert;
+pub mod signals;
 
 use clap::{Parser, Subcommand};
 
@@ -59,6 +60,8 @@ impl Outcome {
 pub const EXIT_ERROR: u8 = 1;
 /// Exit code for command-line usage errors (clap's convention).
 pub const EXIT_USAGE: u8 = 2;
+/// Exit code after Ctrl-C / SIGTERM (128 + SIGINT, the shell convention).
+pub const EXIT_INTERRUPTED: u8 = 130;
 
 /// Runs the parsed command.
 ///
@@ -66,6 +69,7 @@ pub const EXIT_USAGE: u8 = 2;
 /// Any error, with the context needed to fix it.
 pub fn run(args: Args) -> anyhow::Result<Outcome> {
     let globals = Globals { quiet: args.quiet };
+    signals::install();
     match args.command {
         Command::Convert(a) => convert::run(a, &globals),
     }
