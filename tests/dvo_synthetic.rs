@@ -266,3 +266,39 @@ fn release_profile_and_full_resolution_also_meet_the_targets() {
         );
     }
 }
+
+#[test]
+fn nan_intensities_fail_as_non_finite_and_never_leak() {
+    let seq = SequenceConfig {
+        size: ImageSize::new(320, 240),
+        ..SequenceConfig::default()
+    };
+    let (reference, current) = motion_pair(seq, &Isometry3::identity(), false);
+    let mut poisoned = current.gray.clone();
+    poisoned.set(100, 100, f32::NAN);
+    let mut tracker = DvoTracker::new(seq.size, reference.intrinsics, DvoConfig::paper()).unwrap();
+    let est = tracker
+        .estimate_between(
+            (&reference.gray, &reference.depth_m),
+            (&poisoned, &current.depth_m),
+            None,
+            None,
+        )
+        .unwrap();
+    assert!(
+        matches!(est.status, DvoStatus::Failed(DvoFailure::NonFinite { .. })),
+        "{:?}",
+        est.status
+    );
+    assert_finite(&est.current_from_reference);
+    // A non-finite initial guess is a caller error, reported as such.
+    let bad = se3_exp(&Twist::new(f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0));
+    assert!(tracker
+        .estimate_between(
+            (&reference.gray, &reference.depth_m),
+            (&current.gray, &current.depth_m),
+            None,
+            Some(&bad)
+        )
+        .is_err());
+}
