@@ -13,6 +13,25 @@
 //!
 //! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and
 //! allocates nothing per frame), or [`DvoEstimator`] on two explicitly built pyramids.
+//!
+//! # Example
+//! ```
+//! use occmask::dvo::{DvoConfig, DvoTracker};
+//! use occmask::geometry::{se3_exp, Twist};
+//! use occmask::image_buf::ImageSize;
+//! use occmask::synthetic::{motion_pair, SequenceConfig};
+//!
+//! let config = SequenceConfig { size: ImageSize::new(320, 240), ..SequenceConfig::default() };
+//! let truth = se3_exp(&Twist::new(0.01, 0.0, 0.0, 0.0, 0.0, 0.0)); // 1 cm to the right
+//! let (reference, current) = motion_pair(config, &truth, false);
+//! let mut tracker = DvoTracker::new(config.size, reference.intrinsics, DvoConfig::paper())?;
+//! assert!(tracker.track(&reference.gray, &reference.depth_m, None, None)?.is_none()); // first frame
+//! let estimate = tracker.track(&current.gray, &current.depth_m, None, None)?.expect("second frame");
+//! assert!(estimate.is_converged());
+//! let error = estimate.current_from_reference.inverse() * truth;
+//! assert!(error.translation.vector.norm() < 0.003); // metres
+//! # Ok::<(), occmask::Error>(())
+//! ```
 
 pub mod mask;
 pub mod residuals;
