@@ -193,8 +193,11 @@ pub struct ProcessReport {
 
 /// Callbacks during [`process_file`].
 pub trait ProcessHooks {
-    /// Called after each input message is read, with the count so far.
-    fn messages_read(&mut self, _count: u64) {}
+    /// Called after each input message is read, with the count so far; `Break` stops
+    /// processing with [`Error::Interrupted`] (e.g. Ctrl-C).
+    fn messages_read(&mut self, _count: u64) -> std::ops::ControlFlow<()> {
+        std::ops::ControlFlow::Continue(())
+    }
     /// Called after each processed frame with its stamp and mask (e.g. `--export-masks`).
     ///
     /// # Errors
@@ -473,7 +476,12 @@ pub fn process_file<W: Write + Seek>(
     let mut read = 0u64;
     input.for_each_message(read_topics.as_deref(), None, |m| {
         read += 1;
-        hooks.messages_read(read);
+        if hooks.messages_read(read).is_break() {
+            return Err(Error::Interrupted {
+                done: read as usize,
+                total: input.message_count().unwrap_or(read) as usize,
+            });
+        }
         let id = m.header.channel_id;
         if id == topics.color.id || id == topics.depth.id {
             let is_color = id == topics.color.id;

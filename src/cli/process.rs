@@ -2,6 +2,7 @@
 //! files in parallel.
 
 use std::io::{BufWriter, Write};
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -281,6 +282,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
                 },
                 chunk_size_bytes: DEFAULT_CHUNK_SIZE_BYTES,
                 compression_threads: DEFAULT_COMPRESSION_THREADS,
+                ..McapWriteOptions::default()
             },
             ..Default::default()
         },
@@ -299,11 +301,16 @@ struct Hooks<'a> {
 const PROGRESS_STEP_MESSAGES: u64 = 32;
 
 impl ProcessHooks for Hooks<'_> {
-    fn messages_read(&mut self, count: u64) {
+    fn messages_read(&mut self, count: u64) -> ControlFlow<()> {
         if count - self.reported >= PROGRESS_STEP_MESSAGES {
             self.bar.inc(count - self.reported);
             self.total.inc(count - self.reported);
             self.reported = count;
+        }
+        if super::signals::interrupted() {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
         }
     }
 
