@@ -141,7 +141,8 @@ impl Components {
             };
         }
         if config.thin_structure_radius_px > 0 {
-            stats.thin_pixels_erased = self.erase_thin_structures(config.thin_structure_radius_px, accumulation_m);
+            stats.thin_pixels_erased =
+                self.erase_thin_structures(config.thin_structure_radius_px, accumulation_m);
         }
         if config.predict_newly_discovered {
             self.target.copy_from_slice(newly_discovered.as_slice());

@@ -207,7 +207,11 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<
         for x in 0..width {
             let measured = inputs.depth_m.get(x, y);
             let use_current = geometric && measured > 0.0;
-            let z = if use_current { measured } else { inputs.compensated_previous_m.get(x, y) };
+            let z = if use_current {
+                measured
+            } else {
+                inputs.compensated_previous_m.get(x, y)
+            };
             if z <= 0.0 {
                 continue;
             }
