@@ -5,6 +5,7 @@
 //! one match arm in [`run`].
 
 pub mod convert;
+pub mod demo;
 
 use clap::{Parser, Subcommand};
 
@@ -26,6 +27,9 @@ pub struct Args {
 pub enum Command {
     /// Convert an RGB-D dataset folder (TUM, ICSL, LARR) into an MCAP file for Foxglove.
     Convert(convert::ConvertArgs),
+    /// Generate a synthetic sequence with a dominant moving object, run the closed loop (DVO +
+    /// occlusion accumulation), print mask F1 and RPE against ground truth, and write demo.mcap.
+    Demo(demo::DemoArgs),
 }
 
 /// Options every subcommand sees.
@@ -68,6 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<Outcome> {
     let globals = Globals { quiet: args.quiet };
     match args.command {
         Command::Convert(a) => convert::run(a, &globals),
+        Command::Demo(a) => demo::run(a, &globals),
     }
 }
 
@@ -116,12 +121,25 @@ mod tests {
         ])
         .unwrap();
         assert!(args.quiet);
-        let Command::Convert(c) = args.command;
+        let Command::Convert(c) = args.command else {
+            panic!("expected convert")
+        };
         let convert::Dataset::Tum(t) = c.dataset else {
             panic!("expected tum")
         };
         assert_eq!(t.common.output.to_str(), Some("out.mcap"));
         assert_eq!(t.camera.as_deref(), Some("fr2"));
+    }
+
+    #[test]
+    fn demo_arguments_parse_with_defaults() {
+        let args = Args::try_parse_from(["occmask", "demo", "--width", "320"]).unwrap();
+        let Command::Demo(d) = args.command else {
+            panic!("expected demo")
+        };
+        assert_eq!((d.width, d.seed, d.force), (320, 1, false));
+        assert_eq!(d.output.to_str(), Some("demo.mcap"));
+        assert!(Args::try_parse_from(["occmask", "demo", "--width", "100"]).is_err());
     }
 
     #[test]
