@@ -144,8 +144,11 @@ impl Components {
             };
         }
         if config.thin_structure_radius_px > 0 {
-            stats.thin_pixels_erased =
-                self.erase_thin_structures(config.thin_structure_radius_px, accumulation_m);
+            stats.thin_pixels_erased = self.erase_thin_structures(
+                config.thin_structure_radius_px,
+                config.thin_structure_border_margin_px,
+                accumulation_m,
+            );
         }
         if config.predict_newly_discovered {
             self.target.copy_from_slice(newly_discovered.as_slice());
@@ -171,14 +174,22 @@ impl Components {
         stats
     }
 
-    /// Opening of the object set (labels ≠ 0) with a (2r+1)² square: erases from A and from the
-    /// object set every pixel not covered by the opening. Returns the pixels erased.
-    fn erase_thin_structures(&mut self, radius: usize, accumulation_m: &mut DepthMeters) -> usize {
+    /// Thin-structure filter (see `OcclusionConfig::thin_structure_radius_px`): opening of the
+    /// object set (labels ≠ 0) with a (2r+1)² square. Object pixels not covered by the opening
+    /// and farther than `border_margin_px` from the image border (where an object entering the
+    /// view first appears as a thin sliver) leave the object set and lose their accumulation,
+    /// like small components. Returns the pixels erased.
+    fn erase_thin_structures(
+        &mut self,
+        radius: usize,
+        border_margin_px: usize,
+        accumulation_m: &mut DepthMeters,
+    ) -> usize {
         let (width, height) = (self.width, self.height);
         for (m, &l) in self.morph_a.iter_mut().zip(&self.labels) {
             *m = u8::from(l != 0);
         }
-        // Erosion (separable min; outside the image counts as background), then dilation.
+        // Erosion (outside the image counts as background), then dilation.
         let counts = &mut self.column_counts;
         square_filter(
             &mut self.morph_a,
@@ -200,11 +211,18 @@ impl Components {
         );
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
-        for ((label, &opened), value) in self.labels.iter_mut().zip(&self.morph_a).zip(a.iter_mut()) {
+        for (i, (label, &opened)) in self.labels.iter_mut().zip(&self.morph_a).enumerate() {
             if *label != 0 && opened == 0 {
-                *label = 0;
-                *value = 0.0;
-                erased += 1;
+                let (x, y) = (i % width, i / width);
+                let interior = x >= border_margin_px
+                    && y >= border_margin_px
+                    && x + border_margin_px < width
+                    && y + border_margin_px < height;
+                if interior {
+                    *label = 0;
+                    a[i] = 0.0;
+                    erased += 1;
+                }
             }
         }
         erased
