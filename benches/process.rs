@@ -47,8 +47,10 @@ fn bench_process(c: &mut Criterion) {
         batch_events: DEFAULT_BATCH_EVENTS,
         command_line: "bench".into(),
     };
-    let (cursor, _) =
-        convert_sequence(&seq, &config, Cursor::new(Vec::new()), &mut |_, _| {}).expect("convert");
+    let (cursor, _) = convert_sequence(&seq, &config, Cursor::new(Vec::new()), &mut |_, _| {
+        std::ops::ControlFlow::Continue(())
+    })
+    .expect("convert");
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("desk.mcap");
     std::fs::File::create(&path)

@@ -98,7 +98,7 @@ pub struct FrameInput<'a> {
 /// DVO's report for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DvoSummary {
-    /// Converged or why it failed (on failure the motion used is identity).
+    /// Converged or why it failed (on failure the previous frame's motion is used again).
     pub status: DvoStatus,
     /// LM iterations per level (0 = full resolution).
     pub iterations_per_level: [u32; MAX_DVO_LEVELS],
@@ -160,6 +160,7 @@ pub struct Processor {
     detector: OcclusionDetector,
     frames: u64,
     world_from_camera: Isometry3<f64>,
+    last_motion: Isometry3<f64>,
 }
 
 impl Processor {
@@ -183,6 +184,7 @@ impl Processor {
             detector,
             frames: 0,
             world_from_camera: Isometry3::identity(),
+            last_motion: Isometry3::identity(),
         })
     }
 
@@ -194,6 +196,7 @@ impl Processor {
         }
         self.frames = 0;
         self.world_from_camera = Isometry3::identity();
+        self.last_motion = Isometry3::identity();
     }
 
     /// The detector (for its maps and configuration).
@@ -226,7 +229,9 @@ impl Processor {
                         if estimate.is_converged() {
                             estimate.current_from_reference
                         } else {
-                            Isometry3::identity()
+                            // Constant-velocity fallback: at 30 Hz the previous motion is a far
+                            // better guess than identity for a moving camera.
+                            self.last_motion
                         }
                     }
                 }
@@ -263,6 +268,7 @@ impl Processor {
             // C_{i+1} = C_i · (current_from_previous)⁻¹ (algorithm.md §0).
             self.world_from_camera *= current_from_previous.inverse();
         }
+        self.last_motion = current_from_previous;
         stats.pose_us = started.elapsed().as_micros() as u64;
 
         let detect_started = Instant::now();

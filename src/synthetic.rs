@@ -150,7 +150,7 @@ impl SequenceConfig {
 pub enum Scenario {
     /// A 0.3 m box crosses the view at 2 m while the camera sways.
     SmallObjectCrossing,
-    /// A 1.2 m × 1.6 m board passes 1.1 m in front of the camera and covers ≥ 50 % of the image
+    /// A 1.0 m × 1.6 m board passes 1.15 m in front of the camera and covers 50–75 % of the image
     /// for many frames (the case where unmasked DVO locks onto the object).
     DominantObject,
     /// The camera pans right while a box enters from the right image border.
@@ -439,9 +439,12 @@ impl SyntheticSequence {
                 (CameraPath::handheld(), vec![b], 90)
             }
             Scenario::DominantObject => {
+                // Front face 1.15 m away: 1.0 m covers ≈ 460 of 640 columns and the full height,
+                // so the box covers up to ≈ 75 % of the view but never all of it (no visual
+                // odometry can work when nothing static is visible).
                 let b = box_at(
-                    Vector3::new(-1.45, 0.1, 1.15),
-                    Vector3::new(0.6, 0.8, 0.2),
+                    Vector3::new(-1.45, 0.1, 1.35),
+                    Vector3::new(0.5, 0.8, 0.2),
                     leg(0.0, forever, Vector3::new(0.45, 0.0, 0.0), 0.05),
                     seed ^ 0x22,
                 );

@@ -5,6 +5,7 @@
 //! one match arm in [`run`].
 
 pub mod convert;
+pub mod demo;
 pub mod eval;
 pub mod process;
 pub mod signals;
@@ -33,6 +34,9 @@ pub enum Command {
     Process(Box<process::ProcessArgs>),
     /// Score an annotated file against its ground-truth masks and poses (F1, RPE, ATE).
     Eval(eval::EvalArgs),
+    /// Generate a synthetic sequence with a dominant moving object, run the closed loop (DVO +
+    /// occlusion accumulation), print mask F1 and RPE against ground truth, and write demo.mcap.
+    Demo(demo::DemoArgs),
 }
 
 /// Options every subcommand sees.
@@ -80,6 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<Outcome> {
         Command::Convert(a) => convert::run(a, &globals),
         Command::Process(a) => process::run(*a, &globals),
         Command::Eval(a) => eval::run(a, &globals),
+        Command::Demo(a) => demo::run(a, &globals),
     }
 }
 
@@ -136,6 +141,17 @@ mod tests {
         };
         assert_eq!(t.common.output.to_str(), Some("out.mcap"));
         assert_eq!(t.camera.as_deref(), Some("fr2"));
+    }
+
+    #[test]
+    fn demo_arguments_parse_with_defaults() {
+        let args = Args::try_parse_from(["occmask", "demo", "--width", "320"]).unwrap();
+        let Command::Demo(d) = args.command else {
+            panic!("expected demo")
+        };
+        assert_eq!((d.width, d.seed, d.force), (320, 1, false));
+        assert_eq!(d.output.to_str(), Some("demo.mcap"));
+        assert!(Args::try_parse_from(["occmask", "demo", "--width", "100"]).is_err());
     }
 
     #[test]

@@ -51,6 +51,8 @@ pub(super) struct Components {
     /// Morphology scratch (0 / 1 per pixel).
     morph_a: Vec<u8>,
     morph_b: Vec<u8>,
+    /// Per-column window counts of the morphology's column pass.
+    column_counts: Vec<u32>,
 }
 
 /// Neighbour (x + dx, y + dy) if inside the image.
@@ -90,6 +92,7 @@ impl Components {
             updates: Vec::with_capacity(n),
             morph_a: vec![0; n],
             morph_b: vec![0; n],
+            column_counts: vec![0; size.width],
         }
     }
 
@@ -141,8 +144,11 @@ impl Components {
             };
         }
         if config.thin_structure_radius_px > 0 {
-            stats.thin_pixels_erased =
-                self.erase_thin_structures(config.thin_structure_radius_px, accumulation_m);
+            stats.thin_pixels_erased = self.erase_thin_structures(
+                config.thin_structure_radius_px,
+                config.thin_structure_border_margin_px,
+                accumulation_m,
+            );
         }
         if config.predict_newly_discovered {
             self.target.copy_from_slice(newly_discovered.as_slice());
@@ -168,23 +174,55 @@ impl Components {
         stats
     }
 
-    /// Opening of the object set (labels ≠ 0) with a (2r+1)² square: erases from A and from the
-    /// object set every pixel not covered by the opening. Returns the pixels erased.
-    fn erase_thin_structures(&mut self, radius: usize, accumulation_m: &mut DepthMeters) -> usize {
+    /// Thin-structure filter (see `OcclusionConfig::thin_structure_radius_px`): opening of the
+    /// object set (labels ≠ 0) with a (2r+1)² square. Object pixels not covered by the opening
+    /// and farther than `border_margin_px` from the image border (where an object entering the
+    /// view first appears as a thin sliver) leave the object set and lose their accumulation,
+    /// like small components. Returns the pixels erased.
+    fn erase_thin_structures(
+        &mut self,
+        radius: usize,
+        border_margin_px: usize,
+        accumulation_m: &mut DepthMeters,
+    ) -> usize {
         let (width, height) = (self.width, self.height);
         for (m, &l) in self.morph_a.iter_mut().zip(&self.labels) {
             *m = u8::from(l != 0);
         }
-        // Erosion (separable min; outside the image counts as background), then dilation.
-        square_filter(&mut self.morph_a, &mut self.morph_b, width, height, radius, true);
-        square_filter(&mut self.morph_a, &mut self.morph_b, width, height, radius, false);
+        // Erosion (outside the image counts as background), then dilation.
+        let counts = &mut self.column_counts;
+        square_filter(
+            &mut self.morph_a,
+            &mut self.morph_b,
+            counts,
+            width,
+            height,
+            radius,
+            true,
+        );
+        square_filter(
+            &mut self.morph_a,
+            &mut self.morph_b,
+            counts,
+            width,
+            height,
+            radius,
+            false,
+        );
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
-        for ((label, &opened), value) in self.labels.iter_mut().zip(&self.morph_a).zip(a.iter_mut()) {
+        for (i, (label, &opened)) in self.labels.iter_mut().zip(&self.morph_a).enumerate() {
             if *label != 0 && opened == 0 {
-                *label = 0;
-                *value = 0.0;
-                erased += 1;
+                let (x, y) = (i % width, i / width);
+                let interior = x >= border_margin_px
+                    && y >= border_margin_px
+                    && x + border_margin_px < width
+                    && y + border_margin_px < height;
+                if interior {
+                    *label = 0;
+                    a[i] = 0.0;
+                    erased += 1;
+                }
             }
         }
         erased
@@ -310,33 +348,113 @@ impl Components {
 }
 
 /// Separable square min (`erode`) or max filter of radius `r` over the 0/1 image `image`, in place
-/// (`scratch` holds the row pass); pixels outside the image count as 0.
-fn square_filter(image: &mut [u8], scratch: &mut [u8], width: usize, height: usize, r: usize, erode: bool) {
-    let combine = |a: u8, b: u8| if erode { a.min(b) } else { a.max(b) };
-    let start = u8::from(erode);
-    let sample = |values: &[u8], i: isize, n: usize, stride: usize, offset: usize| -> u8 {
-        if i < 0 || i >= n as isize {
-            0
-        } else {
-            values[offset + i as usize * stride]
-        }
-    };
-    for y in 0..height {
+/// (`scratch` holds the row pass); pixels outside the image count as 0. Sliding-window counts:
+/// O(1) per pixel whatever the radius.
+fn square_filter(
+    image: &mut [u8],
+    scratch: &mut [u8],
+    counts: &mut [u32],
+    width: usize,
+    height: usize,
+    r: usize,
+    erode: bool,
+) {
+    let window = (2 * r + 1) as u32;
+    let decide = |count: u32| u8::from(if erode { count == window } else { count > 0 });
+    // Row pass: count of set pixels in [x − r, x + r] of the row.
+    for (row, out) in image.chunks_exact(width).zip(scratch.chunks_exact_mut(width)) {
+        let mut count: u32 = row.iter().take(r.min(width)).map(|&v| u32::from(v)).sum();
         for x in 0..width {
-            let mut v = start;
-            for d in -(r as isize)..=r as isize {
-                v = combine(v, sample(image, x as isize + d, width, 1, y * width));
+            if x + r < width {
+                count += u32::from(row[x + r]);
             }
-            scratch[y * width + x] = v;
+            out[x] = decide(count);
+            if x >= r {
+                count -= u32::from(row[x - r]);
+            }
+        }
+    }
+    // Column pass: running per-column counts over rows [y − r, y + r].
+    counts.fill(0);
+    for y in 0..r.min(height) {
+        for (c, &v) in counts.iter_mut().zip(&scratch[y * width..(y + 1) * width]) {
+            *c += u32::from(v);
         }
     }
     for y in 0..height {
-        for x in 0..width {
-            let mut v = start;
-            for d in -(r as isize)..=r as isize {
-                v = combine(v, sample(scratch, y as isize + d, height, width, x));
+        if y + r < height {
+            for (c, &v) in counts
+                .iter_mut()
+                .zip(&scratch[(y + r) * width..(y + r + 1) * width])
+            {
+                *c += u32::from(v);
             }
-            image[y * width + x] = v;
+        }
+        for (out, &c) in image[y * width..(y + 1) * width].iter_mut().zip(counts.iter()) {
+            *out = decide(c);
+        }
+        if y >= r {
+            for (c, &v) in counts
+                .iter_mut()
+                .zip(&scratch[(y - r) * width..(y - r + 1) * width])
+            {
+                *c -= u32::from(v);
+            }
+        }
+    }
+}
+
+/// Reference square filter: the definition, pixel by pixel (for the agreement test).
+#[cfg(test)]
+fn square_filter_scalar(image: &[u8], width: usize, height: usize, r: usize, erode: bool) -> Vec<u8> {
+    let mut out = vec![0; image.len()];
+    for y in 0..height {
+        for x in 0..width {
+            let mut all = true;
+            let mut any = false;
+            for dy in -(r as isize)..=r as isize {
+                for dx in -(r as isize)..=r as isize {
+                    let (xx, yy) = (x as isize + dx, y as isize + dy);
+                    let inside = xx >= 0 && yy >= 0 && xx < width as isize && yy < height as isize;
+                    let v = inside && image[yy as usize * width + xx as usize] != 0;
+                    all &= v;
+                    any |= v;
+                }
+            }
+            out[y * width + x] = u8::from(if erode { all } else { any });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sliding_square_filter_matches_the_definition() {
+        let (width, height) = (37, 23);
+        let mut state = 12345u64;
+        let image: Vec<u8> = (0..width * height)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                u8::from(!(state >> 33).is_multiple_of(3))
+            })
+            .collect();
+        for r in 0..4 {
+            for erode in [true, false] {
+                let mut fast = image.clone();
+                let mut scratch = vec![0; image.len()];
+                let mut counts = vec![0; width];
+                square_filter(&mut fast, &mut scratch, &mut counts, width, height, r, erode);
+                assert_eq!(
+                    fast,
+                    square_filter_scalar(&image, width, height, r, erode),
+                    "r {r} erode {erode}"
+                );
+            }
         }
     }
 }

@@ -93,10 +93,14 @@ pub struct OcclusionConfig {
     /// Warp depth and ΔZ comparison.
     pub warp_depth: WarpDepth,
     /// Radius r (px) of a square (2r+1)² morphological opening of {A > τ_α} before labelling:
-    /// object structures thinner than 2r+1 px are erased from A like small components. 0 = off
-    /// (the release). Not in the paper: it removes the 1–3 px strips that flickering Kinect depth
-    /// edges leave along long edges of static scenes (see the README's detector section).
+    /// object structures thinner than 2r+1 px are erased from A like small components (except
+    /// near the border, see `thin_structure_border_margin_px`). 0 = off (the release). Not in the paper: it
+    /// removes the 1–3 px strips that flickering Kinect depth edges leave along long edges of
+    /// static scenes (see the README's detector section).
     pub thin_structure_radius_px: usize,
+    /// Thin structures within this many pixels of the image border are kept: objects entering
+    /// the view start as thin slivers there.
+    pub thin_structure_border_margin_px: usize,
 }
 
 impl Default for OcclusionConfig {
@@ -112,6 +116,7 @@ impl Default for OcclusionConfig {
             prune_adjacency: Adjacency::Four,
             warp_depth: WarpDepth::PreviousCompensated,
             thin_structure_radius_px: 1,
+            thin_structure_border_margin_px: 16,
         }
     }
 }

