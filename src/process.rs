@@ -23,7 +23,7 @@ use crate::mcap_io::annotate::{
     METADATA_PROCESS,
 };
 use crate::mcap_io::input::decode::{
-    decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into, ImageMsg,
+    decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
 };
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
 use crate::mcap_io::input::{McapInput, RawMessage};
@@ -212,10 +212,32 @@ pub trait ProcessHooks {
 pub struct NoHooks;
 impl ProcessHooks for NoHooks {}
 
+/// Decoded pixels of a queued image.
+enum Pixels {
+    Gray(GrayF32),
+    Depth(DepthMeters),
+}
+
+/// A colour or depth image, decoded by the prefetch thread, waiting for its partner.
 struct Queued {
     log_time_ns: u64,
-    msg: ImageMsg,
+    timestamp_ns: u64,
+    frame_id: String,
+    pixels: Pixels,
+    decode_ms: f64,
 }
+
+/// What the prefetch thread hands over per input message.
+struct Prefetched {
+    /// The message (copied to the output in copy mode).
+    message: RawMessage,
+    /// The decoded image when the message is on the colour (`true`) or depth topic.
+    image: Option<(bool, Queued)>,
+}
+
+/// Messages the prefetch thread may read ahead of processing: enough to decode the next frame
+/// while the current one is processed, few enough to keep memory small (images are decoded).
+const PREFETCH_MESSAGES: usize = 8;
 
 enum Pairing {
     Pair(Box<(Queued, Queued)>),
@@ -242,7 +264,7 @@ impl Pairer {
             }
             return None;
         };
-        let (tc, td) = (c.msg.timestamp_ns, d.msg.timestamp_ns);
+        let (tc, td) = (c.timestamp_ns, d.timestamp_ns);
         if td.saturating_add(tol) < tc {
             self.depth.pop_front();
             return Some(Pairing::UnpairedDepth);
@@ -253,7 +275,7 @@ impl Pairer {
         }
         let ready = match self.depth.get(1) {
             Some(d2) => {
-                if tc.abs_diff(d2.msg.timestamp_ns) < tc.abs_diff(td) {
+                if tc.abs_diff(d2.timestamp_ns) < tc.abs_diff(td) {
                     self.depth.pop_front();
                     return Some(Pairing::UnpairedDepth);
                 }
@@ -470,44 +492,86 @@ pub fn process_file<W: Write + Seek>(
         topics: &topics,
         intrinsics,
         calibration_size,
-        depth_units_per_meter,
         external_poses: &external_poses,
     };
-    let mut read = 0u64;
-    input.for_each_message(read_topics.as_deref(), None, |m| {
-        read += 1;
-        if hooks.messages_read(read).is_break() {
-            return Err(Error::Interrupted {
-                done: read as usize,
-                total: input.message_count().unwrap_or(read) as usize,
-            });
-        }
+    // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
+    // pipeline and writes: decoding then overlaps with processing.
+    let decode = |m: &RawMessage| -> Result<Option<(bool, Queued)>> {
         let id = m.header.channel_id;
-        if id == topics.color.id || id == topics.depth.id {
-            let is_color = id == topics.color.id;
-            let (ct, topic) = if is_color {
-                (color_ct, &topics.color.topic)
-            } else {
-                (depth_ct, &topics.depth.topic)
-            };
-            let queued = Queued {
+        if id != topics.color.id && id != topics.depth.id {
+            return Ok(None);
+        }
+        let is_color = id == topics.color.id;
+        let start = config.timings.then(Instant::now);
+        let (ct, topic) = if is_color {
+            (color_ct, &topics.color.topic)
+        } else {
+            (depth_ct, &topics.depth.topic)
+        };
+        let msg = decode_image(ct, topic, &m.data)?;
+        let pixels = if is_color {
+            let mut gray = GrayF32::filled(ImageSize::new(0, 0), 0.0);
+            gray_from_image_into(&msg, topic, &mut gray)?;
+            Pixels::Gray(gray)
+        } else {
+            let mut depth = DepthMeters::filled(ImageSize::new(0, 0), 0.0);
+            depth_from_image_into(&msg, topic, depth_units_per_meter, &mut depth)?;
+            Pixels::Depth(depth)
+        };
+        Ok(Some((
+            is_color,
+            Queued {
                 log_time_ns: m.header.log_time,
-                msg: decode_image(ct, topic, &m.data)?,
-            };
-            if is_color {
-                state.report.color_messages += 1;
-                state.first_color_ns.get_or_insert(queued.msg.timestamp_ns);
-                state.pairer.color.push_back(queued);
-            } else {
-                state.report.depth_messages += 1;
-                state.pairer.depth.push_back(queued);
+                timestamp_ns: msg.timestamp_ns,
+                frame_id: msg.frame_id,
+                pixels,
+                decode_ms: start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3),
+            },
+        )))
+    };
+    std::thread::scope(|scope| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Prefetched>>(PREFETCH_MESSAGES);
+        let read_topics = read_topics.as_deref();
+        let decode = &decode;
+        scope.spawn(move || {
+            let result = input.for_each_message(read_topics, None, |message| {
+                let item = decode(&message).map(|image| Prefetched { message, image });
+                let failed = item.is_err();
+                // A closed channel means the consumer stopped (error or Ctrl-C): stop reading.
+                Ok(tx.send(item).is_ok() && !failed)
+            });
+            if let Err(e) = result {
+                let _ = tx.send(Err(e));
             }
+        });
+        let mut read = 0u64;
+        for item in rx {
+            let Prefetched { message, image } = item?;
+            read += 1;
+            if hooks.messages_read(read).is_break() {
+                return Err(Error::Interrupted {
+                    done: read as usize,
+                    total: input.message_count().unwrap_or(read) as usize,
+                });
+            }
+            match image {
+                Some((true, queued)) => {
+                    state.report.color_messages += 1;
+                    state.first_color_ns.get_or_insert(queued.timestamp_ns);
+                    state.pairer.color.push_back(queued);
+                }
+                Some((false, queued)) => {
+                    state.report.depth_messages += 1;
+                    state.pairer.depth.push_back(queued);
+                }
+                None => {}
+            }
+            if copy {
+                state.pending.push_back(message);
+            }
+            state.drain(&ctx, &mut writer, make_processor, hooks, false)?;
         }
-        if copy {
-            state.pending.push_back(m);
-        }
-        state.drain(&ctx, &mut writer, make_processor, hooks, false)?;
-        Ok(true)
+        Ok(())
     })?;
     state.drain(&ctx, &mut writer, make_processor, hooks, true)?;
     state.report.copied_messages = writer.copied_messages();
@@ -521,7 +585,6 @@ struct FrameContext<'a> {
     topics: &'a RgbdTopics,
     intrinsics: PinholeIntrinsics,
     calibration_size: Option<ImageSize>,
-    depth_units_per_meter: f64,
     external_poses: &'a [StampedPose],
 }
 
@@ -579,7 +642,7 @@ impl FrameLoop {
         color: Queued,
         depth: Queued,
     ) -> Result<()> {
-        let stamp = color.msg.timestamp_ns;
+        let stamp = color.timestamp_ns;
         let offset = stamp.saturating_sub(self.first_color_ns.unwrap_or(stamp));
         let before_start = ctx.config.start_offset_ns.is_some_and(|s| offset < s);
         let after_end = ctx.config.end_offset_ns.is_some_and(|e| offset >= e);
@@ -598,14 +661,11 @@ impl FrameLoop {
         } else {
             None
         };
-        let decode_start = ctx.config.timings.then(Instant::now);
-        gray_from_image_into(&color.msg, &ctx.topics.color.topic, &mut self.gray)?;
-        depth_from_image_into(
-            &depth.msg,
-            &ctx.topics.depth.topic,
-            ctx.depth_units_per_meter,
-            &mut self.depth_m,
-        )?;
+        let decode_ms = color.decode_ms + depth.decode_ms;
+        if let (Pixels::Gray(gray), Pixels::Depth(depth_m)) = (color.pixels, depth.pixels) {
+            self.gray = gray;
+            self.depth_m = depth_m;
+        }
         let size = self.gray.size();
         if self.depth_m.size() != size {
             return Err(Error::SizeMismatch {
@@ -627,7 +687,6 @@ impl FrameLoop {
                 found: cal,
             });
         }
-        let decode_ms = decode_start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3);
         match self.frame_size {
             Some(first) if first != size => {
                 return Err(Error::SizeMismatch {
@@ -683,7 +742,7 @@ impl FrameLoop {
         writer.write_frame(&FrameAnnotation {
             log_time_ns: color.log_time_ns,
             timestamp_ns: stamp,
-            frame_id: &color.msg.frame_id,
+            frame_id: &color.frame_id,
             mask: &result.mask,
             world_from_camera: &result.world_from_camera,
             accumulation: result.accumulation.as_ref(),
