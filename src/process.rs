@@ -2,9 +2,10 @@
 //! [`FrameProcessor`] per pair, and write the annotated copy or sidecar.
 //!
 //! Memory is bounded whatever the file length: messages stream through (indexed, log-time
-//! order when the file has a summary), at most [`MAX_QUEUED_IMAGES`] colour and depth images
-//! wait for a partner, and input messages wait only until no new message can be written
-//! before them (new messages take the colour message's log time, so the output stays in
+//! order when the file has a summary) from a prefetch thread that also decodes the images (at
+//! most [`PREFETCH_MESSAGES`] ahead, so decoding overlaps with the pipeline), at most
+//! [`MAX_QUEUED_IMAGES`] colour and depth images wait for a partner, and input messages wait
+//! only until no new message can be written before them (new messages take the colour message's log time, so the output stays in
 //! log-time order). Only the estimated trajectory (64 bytes per frame) and external poses
 //! (`--pose-topic`) are kept whole.
 
@@ -237,7 +238,7 @@ struct Prefetched {
 
 /// Messages the prefetch thread may read ahead of processing: enough to decode the next frame
 /// while the current one is processed, few enough to keep memory small (images are decoded).
-const PREFETCH_MESSAGES: usize = 8;
+pub const PREFETCH_MESSAGES: usize = 8;
 
 enum Pairing {
     Pair(Box<(Queued, Queued)>),
