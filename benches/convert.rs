@@ -7,6 +7,7 @@
 //! end to end (peak RSS, ratio to `cat`).
 
 use std::io::Cursor;
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -79,7 +80,7 @@ fn bench_convert(c: &mut Criterion) {
         group.bench_function(name, |b| {
             b.iter(|| {
                 let sink = Cursor::new(Vec::with_capacity(64 << 20));
-                convert_sequence(&seq, &cfg, sink, &mut |_, _| {})
+                convert_sequence(&seq, &cfg, sink, &mut |_, _| ControlFlow::Continue(()))
                     .expect("conversion must succeed")
                     .1
                     .messages

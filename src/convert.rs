@@ -9,6 +9,7 @@
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap};
 use std::io::{Seek, Write};
+use std::ops::ControlFlow;
 use std::sync::mpsc;
 
 use rayon::prelude::*;
@@ -240,7 +241,8 @@ fn association_text(seq: &Sequence, association: &Association) -> String {
 }
 
 /// Converts `seq` into an MCAP file written to `sink`. `progress(done, total)` is called
-/// after each event (image or pose) is written. Returns the sink (finished) and a report.
+/// after each event (image or pose) is written; returning `ControlFlow::Break` stops the
+/// conversion with [`Error::Interrupted`]. Returns the sink (finished) and a report.
 ///
 /// # Errors
 /// Any read, decode, size or write error; nothing is committed by this function (the caller
@@ -249,7 +251,7 @@ pub fn convert_sequence<W: Write + Seek>(
     seq: &Sequence,
     config: &ConvertConfig,
     sink: W,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut dyn FnMut(usize, usize) -> ControlFlow<()>,
 ) -> Result<(W, ConvertReport)> {
     if !(config.depth_units_per_meter.is_finite() && config.depth_units_per_meter > 0.0) {
         return Err(Error::InvalidParameter {
@@ -416,11 +418,20 @@ pub fn convert_sequence<W: Write + Seek>(
                     }
                 }
                 done += 1;
-                progress(done, total);
+                if progress(done, total).is_break() {
+                    return Err(Error::Interrupted { done, total });
+                }
             }
         }
         Ok(())
     })?;
+    if done != total {
+        // Only reachable if the reader thread stopped without reporting an error.
+        return Err(Error::Dataset {
+            path: seq.root.clone(),
+            message: format!("conversion stopped after {done} of {total} images and poses"),
+        });
+    }
     report.image_size = expected_size.unwrap_or_default();
 
     let first_ns = events

@@ -100,6 +100,15 @@ pub enum Error {
     /// The MCAP library reported an error.
     #[error("MCAP: {0}")]
     Mcap(#[from] mcap::McapError),
+
+    /// The caller asked to stop (e.g. Ctrl-C); partial output is discarded.
+    #[error("interrupted after {done} of {total} items; no output was written")]
+    Interrupted {
+        /// Items finished.
+        done: usize,
+        /// Items planned.
+        total: usize,
+    },
 }
 
 impl Error {

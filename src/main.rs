@@ -20,7 +20,14 @@ fn main() -> ExitCode {
         Ok(outcome) => ExitCode::from(outcome.exit_code()),
         Err(err) => {
             eprintln!("error: {err:#}");
-            ExitCode::from(cli::EXIT_ERROR)
+            let interrupted = err
+                .chain()
+                .any(|e| matches!(e.downcast_ref(), Some(occmask::Error::Interrupted { .. })));
+            ExitCode::from(if interrupted {
+                cli::EXIT_INTERRUPTED
+            } else {
+                cli::EXIT_ERROR
+            })
         }
     }
 }

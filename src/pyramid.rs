@@ -333,38 +333,33 @@ pub fn downsample_depth_into(src: &DepthMeters, dst: &mut DepthMeters) -> Result
     Ok(())
 }
 
-/// Derivative of a 1-D signal at index `i` of `n` from its neighbours `prev`, `centre`,
-/// `next` (central difference, one-sided at the ends).
-#[inline]
-fn intensity_derivative(prev: f32, centre: f32, next: f32, i: usize, n: usize) -> f32 {
-    if n < 2 {
-        0.0
-    } else if i == 0 {
-        next - centre
-    } else if i + 1 == n {
-        centre - prev
-    } else {
-        0.5 * (next - prev)
-    }
-}
-
 /// Depth derivative at a valid centre from its neighbours (0 = invalid or outside): central
-/// difference when both neighbours are on the centre's surface, one-sided when only one is,
-/// NaN when neither is (isolated pixel or a ridge between two depth edges).
-#[inline]
+/// difference when both neighbours are on the centre's surface (within
+/// [`DEPTH_EDGE_RELATIVE`]), one-sided when only one is, NaN when neither is (isolated pixel or
+/// a ridge between two depth edges). Branch-free: the one-sided differences are averaged with
+/// 0/1 weights and a table lookup of 1/count (no division, no branch).
+#[inline(always)]
 fn depth_derivative(prev: f32, centre: f32, next: f32) -> f32 {
+    const INV_COUNT: [f32; 3] = [f32::NAN, 1.0, 0.5];
     let limit = DEPTH_EDGE_RELATIVE * centre;
-    let prev_ok = prev > 0.0 && (prev - centre).abs() <= limit;
-    let next_ok = next > 0.0 && (next - centre).abs() <= limit;
-    match (prev_ok, next_ok) {
-        (true, true) => 0.5 * (next - prev),
-        (false, true) => next - centre,
-        (true, false) => centre - prev,
-        (false, false) => f32::NAN,
+    let p_ok = prev > 0.0 && (prev - centre).abs() <= limit;
+    let n_ok = next > 0.0 && (next - centre).abs() <= limit;
+    let (wp, wn) = (f32::from(u8::from(p_ok)), f32::from(u8::from(n_ok)));
+    (wn * (next - centre) + wp * (centre - prev)) * INV_COUNT[usize::from(p_ok) + usize::from(n_ok)]
+}
+
+/// A depth as the pyramid stores it: positive finite, else 0 (invalid).
+#[inline(always)]
+fn clean_depth(z: f32) -> f32 {
+    if z > 0.0 && z < f32::INFINITY {
+        z
+    } else {
+        0.0
     }
 }
 
-/// Fills the packed per-pixel samples of one level (see [`TargetSample`]).
+/// Fills the packed per-pixel samples of one level (see [`TargetSample`]). Intensity gradients
+/// are central differences, one-sided on the image border.
 ///
 /// # Errors
 /// [`Error::SizeMismatch`] / [`Error::BufferLength`] when the sizes disagree.
@@ -388,12 +383,13 @@ pub fn pack_samples_into(gray: &GrayF32, depth_m: &DepthMeters, samples: &mut [T
         return Ok(());
     }
     let (g, d) = (gray.as_slice(), depth_m.as_slice());
-    let depth_at = |i: usize| {
-        let z = d[i];
-        if z.is_finite() && z > 0.0 {
-            z
-        } else {
-            0.0
+    // 1 / (distance between the two samples of a difference): ½ inside, 1 on the border, and 0
+    // for a one-pixel side (no derivative at all).
+    let inv_spacing = |i: usize, n: usize| -> f32 {
+        match (i > 0, i + 1 < n) {
+            (true, true) => 0.5,
+            (false, false) => 0.0,
+            _ => 1.0,
         }
     };
     samples
@@ -402,31 +398,39 @@ pub fn pack_samples_into(gray: &GrayF32, depth_m: &DepthMeters, samples: &mut [T
         .for_each(|(chunk, rows)| {
             for (r, out) in rows.chunks_exact_mut(w).enumerate() {
                 let y = chunk * ROWS_PER_TASK + r;
-                let up = y.saturating_sub(1);
-                let down = (y + 1).min(h - 1);
+                let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
+                let inv_dy = inv_spacing(y, h);
+                let (g_row, g_up, g_down) = (
+                    &g[y * w..(y + 1) * w],
+                    &g[up * w..(up + 1) * w],
+                    &g[down * w..(down + 1) * w],
+                );
+                let (d_row, d_up, d_down) = (
+                    &d[y * w..(y + 1) * w],
+                    &d[up * w..(up + 1) * w],
+                    &d[down * w..(down + 1) * w],
+                );
+                // Depth neighbours outside the image read as invalid.
+                let (has_up, has_down) = (y > 0, y + 1 < h);
                 for (x, s) in out.iter_mut().enumerate() {
-                    let i = y * w + x;
-                    let left = x.saturating_sub(1);
-                    let right = (x + 1).min(w - 1);
-                    let gx = intensity_derivative(g[y * w + left], g[i], g[y * w + right], x, w);
-                    let gy = intensity_derivative(g[up * w + x], g[i], g[down * w + x], y, h);
-                    let z = depth_at(i);
+                    let (left, right) = (x.saturating_sub(1), (x + 1).min(w - 1));
+                    let gx = (g_row[right] - g_row[left]) * inv_spacing(x, w);
+                    let gy = (g_down[x] - g_up[x]) * inv_dy;
+                    let z = clean_depth(d_row[x]);
                     let (zv, zx, zy) = if z > 0.0 {
-                        let zl = if x > 0 { depth_at(i - 1) } else { 0.0 };
-                        let zr = if x + 1 < w { depth_at(i + 1) } else { 0.0 };
-                        let zu = if y > 0 { depth_at(i - w) } else { 0.0 };
-                        let zd = if y + 1 < h { depth_at(i + w) } else { 0.0 };
+                        let zl = if x > 0 { clean_depth(d_row[left]) } else { 0.0 };
+                        let zr = if x + 1 < w { clean_depth(d_row[right]) } else { 0.0 };
+                        let zu = if has_up { clean_depth(d_up[x]) } else { 0.0 };
+                        let zd = if has_down { clean_depth(d_down[x]) } else { 0.0 };
                         let zx = depth_derivative(zl, z, zr);
                         let zy = depth_derivative(zu, z, zd);
-                        if zx.is_nan() || zy.is_nan() {
-                            (f32::NAN, f32::NAN, f32::NAN)
-                        } else {
-                            (z, zx, zy)
-                        }
+                        // A NaN in either derivative makes the whole depth channel unusable.
+                        let poison = 0.0 * (zx + zy);
+                        (z + poison, zx + poison, zy + poison)
                     } else {
                         (f32::NAN, f32::NAN, f32::NAN)
                     };
-                    *s = TargetSample([g[i], gx, gy, zv, zx, zy, 0.0, 0.0]);
+                    *s = TargetSample([g_row[x], gx, gy, zv, zx, zy, 0.0, 0.0]);
                 }
             }
         });

@@ -171,7 +171,11 @@ fn bad_missing_list_file_or_directory() {
     let c = tum_case();
     std::fs::remove_file(c.dir.join("depth.txt")).unwrap();
     let out = convert("tum", &c.dir, &c.out, &[]);
-    assert_fails(&out, &c.out, &["expected depth.txt", "depth.txt"]);
+    assert_fails(
+        &out,
+        &c.out,
+        &["expected depth.txt", "depth.txt", "use `occmask convert larr`"],
+    );
 
     let tmp = tempfile::tempdir().unwrap();
     let larr = tmp.path().join("larr");
@@ -481,4 +485,62 @@ fn jpeg_colour_passes_through_unchanged() {
         }
     }
     assert_eq!(n, 5);
+}
+
+#[test]
+fn icsl_uses_millimetres_and_the_icsl_camera() {
+    let c = tum_case();
+    let out = convert("icsl", &c.dir, &c.out, &["-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let reader = McapFileReader::open(&c.out).unwrap();
+    let md = &reader.metadata().unwrap()[0].metadata;
+    assert_eq!(md["dataset_kind"], "icsl");
+    assert_eq!(md["depth_units_per_meter"], "1000");
+    assert_eq!(md["intrinsics_fx_fy_cx_cy"], "537.6,539,316.1,245.5");
+    let depth = reader
+        .channels()
+        .into_iter()
+        .find(|ch| ch.topic == TOPIC_DEPTH_IMAGE)
+        .unwrap();
+    assert_eq!(depth.metadata["depth_units_per_meter"], "1000");
+}
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_stops_cleanly_without_leaving_files() {
+    use std::time::{Duration, Instant};
+    let src = shared_data("7scenes_redkitchen_300");
+    let tmp = tempfile::tempdir().unwrap();
+    let out_path = tmp.path().join("out.mcap");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(["convert", "tum"])
+        .arg(&src)
+        .arg("-o")
+        .arg(&out_path)
+        .args(["--camera", "kinect-default", "-q"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The temporary file appears after the signal handler is installed and the lists are read;
+    // converting 300 frames then takes over a second.
+    let started = Instant::now();
+    while !entries(tmp.path()).iter().any(|e| e.ends_with(".tmp")) {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "no temporary file appeared"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let pid = libc::pid_t::try_from(child.id()).unwrap();
+    // SAFETY: sending a signal to our own child process.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGINT) }, 0);
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted after"), "{err}");
+    assert!(
+        entries(tmp.path()).is_empty(),
+        "left behind: {:?}",
+        entries(tmp.path())
+    );
 }

@@ -33,7 +33,7 @@ for _ in $(seq "$RUNS"); do
 done
 cat_best=$(printf '%s\n' "${cat_times[@]}" | best)
 
-conv_times=(); rss_kb=0
+conv_times=(); cpu_times=(); rss_kb=0
 for _ in $(seq "$RUNS"); do
   t0=$(now_ns)
   /usr/bin/time -v -o "$OUT/time.txt" "$BIN" convert tum "$DATA" -o "$OUT/out.mcap" --force -q "$@"
@@ -41,17 +41,20 @@ for _ in $(seq "$RUNS"); do
   conv_times+=($((t1 - t0)))
   r=$(awk -F: '/Maximum resident set size/ {gsub(/ /, "", $2); print $2}' "$OUT/time.txt")
   (( r > rss_kb )) && rss_kb=$r
+  cpu_times+=("$(awk -F: '/User time|System time/ {s += $2} END {printf "%.3f", s}' "$OUT/time.txt")")
 done
+cpu_best=$(printf '%s\n' "${cpu_times[@]}" | best)
 conv_best=$(printf '%s\n' "${conv_times[@]}" | best)
 out_bytes=$(stat -c %s "$OUT/out.mcap")
 
 awk -v f="$frames" -v ib="$input_bytes" -v ob="$out_bytes" -v cb="$conv_best" -v kb="$cat_best" \
-    -v rss="$rss_kb" -v runs="$RUNS" -v args="$*" 'BEGIN {
+    -v rss="$rss_kb" -v runs="$RUNS" -v args="$*" -v cpu="$cpu_best" -v load="$(cut -d' ' -f1 /proc/loadavg)" 'BEGIN {
   s = cb / 1e9; k = kb / 1e9;
   printf "dataset frames       %d (best of %d runs, args: %s)\n", f, runs, (args == "" ? "default" : args);
   printf "input image bytes    %.1f MB\n", ib / 1e6;
   printf "output file          %.1f MB (%.0f %% of input)\n", ob / 1e6, 100 * ob / ib;
   printf "convert wall time    %.3f s  -> %.1f frames/s, %.1f MB/s\n", s, f / s, ib / 1e6 / s;
+  printf "CPU time (user+sys)  %.3f s (best run; machine load average %s)\n", cpu, load;
   printf "peak RSS             %.1f MB\n", rss / 1024;
   printf "cat of same files    %.3f s  -> %.1f MB/s\n", k, ib / 1e6 / k;
   printf "ratio convert / cat  %.1f x\n", s / k;

@@ -1,6 +1,7 @@
 //! `occmask convert`: dataset folder → MCAP.
 
 use std::io::{BufWriter, IsTerminal};
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -12,7 +13,9 @@ use occmask::convert::{
     convert_sequence, resolve_intrinsics, ConvertConfig, ConvertReport, DEFAULT_BATCH_EVENTS,
 };
 use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
-use occmask::mcap_io::writer::{DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_COMPRESSION_THREADS};
+use occmask::mcap_io::writer::{
+    DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_COMPRESSION_LEVEL, DEFAULT_COMPRESSION_THREADS,
+};
 use occmask::mcap_io::{AtomicOutput, Compression, McapWriteOptions};
 use occmask::time::format_ns_as_seconds;
 
@@ -106,9 +109,9 @@ pub struct LarrArgs {
 /// Chunk compression choices.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum CompressionArg {
-    /// zstd: smallest files.
+    /// Smallest files.
     Zstd,
-    /// lz4: faster, larger.
+    /// Faster, larger.
     Lz4,
     /// No compression.
     None,
@@ -139,6 +142,10 @@ pub struct CommonArgs {
     /// Chunk compression.
     #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
     pub compression: CompressionArg,
+
+    /// Compression level (0 = the codec's default, 3 for zstd; 19 is smallest and slowest).
+    #[arg(long, default_value_t = DEFAULT_COMPRESSION_LEVEL)]
+    pub compression_level: u32,
 
     /// Uncompressed chunk size, MiB.
     #[arg(long, value_parser = parse_positive, default_value_t = (DEFAULT_CHUNK_SIZE_BYTES >> 20) as f64)]
@@ -215,6 +222,7 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
                 CompressionArg::Lz4 => Compression::Lz4,
                 CompressionArg::None => Compression::None,
             },
+            compression_level: common.compression_level,
             chunk_size_bytes: (common.chunk_size_mib * 1024.0 * 1024.0) as u64,
             compression_threads: common.compression_threads,
         },
@@ -228,6 +236,11 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let mut progress = |done: usize, total: usize| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
+        if super::signals::interrupted() {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
     };
     let result = convert_sequence(&seq, &config, BufWriter::new(file), &mut progress);
     bar.finish_and_clear();

@@ -6,6 +6,7 @@
 
 pub mod convert;
 pub mod demo;
+pub mod signals;
 
 use clap::{Parser, Subcommand};
 
@@ -63,6 +64,8 @@ impl Outcome {
 pub const EXIT_ERROR: u8 = 1;
 /// Exit code for command-line usage errors (clap's convention).
 pub const EXIT_USAGE: u8 = 2;
+/// Exit code after Ctrl-C / SIGTERM (128 + SIGINT, the shell convention).
+pub const EXIT_INTERRUPTED: u8 = 130;
 
 /// Runs the parsed command.
 ///
@@ -70,6 +73,7 @@ pub const EXIT_USAGE: u8 = 2;
 /// Any error, with the context needed to fix it.
 pub fn run(args: Args) -> anyhow::Result<Outcome> {
     let globals = Globals { quiet: args.quiet };
+    signals::install();
     match args.command {
         Command::Convert(a) => convert::run(a, &globals),
         Command::Demo(a) => demo::run(a, &globals),

@@ -18,9 +18,16 @@ pub fn load(root: &Path, kind: DatasetKind) -> Result<Sequence> {
     let list = |name: &str, what: &str| {
         let path = root.join(name);
         if !path.is_file() {
+            let hint = if root.join("rgb").is_dir() && root.join("depth").is_dir() {
+                " (for folders of <time>.png images without lists, use `occmask convert larr`)"
+            } else {
+                ""
+            };
             return Err(Error::Dataset {
                 path: path.clone(),
-                message: format!("expected {name} listing the {what} images ('timestamp path' per line), found no such file"),
+                message: format!(
+                    "expected {name} listing the {what} images ('timestamp path' per line), found no such file{hint}"
+                ),
             });
         }
         let images = read_image_list(&path, root)?;

@@ -92,6 +92,12 @@ pub fn is_degenerate(h: &Matrix6<f64>) -> bool {
     !(eig.min() > DEGENERATE_MIN_SCALED_EIGENVALUE)
 }
 
+/// True when the cost, H and g are all finite (a NaN intensity in the input, for instance,
+/// poisons them; that is reported as [`LevelError::NonFinite`], never passed on).
+fn is_finite_system(ne: &NormalEquations) -> bool {
+    ne.cost.is_finite() && ne.hessian_upper.iter().chain(&ne.gradient).all(|v| v.is_finite())
+}
+
 /// Solves (H + λ·diag H) δ = −g; `None` when the damped system is not positive definite or
 /// the step is not finite.
 pub fn damped_step(ne: &NormalEquations, lambda: f64) -> Option<Twist> {
@@ -117,7 +123,7 @@ pub fn optimize_level(
     current_from_reference: &mut Isometry3<f64>,
 ) -> Result<LevelResult, LevelError> {
     let mut ne = accumulate_normal_equations(points, row_width, target, current_from_reference, cost);
-    if !ne.cost.is_finite() {
+    if !is_finite_system(&ne) {
         return Err(LevelError::NonFinite);
     }
     if is_degenerate(&ne.hessian()) {
@@ -134,7 +140,7 @@ pub fn optimize_level(
         iterations += 1;
         let candidate = se3_exp(&step) * *current_from_reference;
         let cand_ne = accumulate_normal_equations(points, row_width, target, &candidate, cost);
-        if !cand_ne.cost.is_finite() {
+        if !is_finite_system(&cand_ne) {
             return Err(LevelError::NonFinite);
         }
         let small = step.amax() < schedule.step_tolerance;

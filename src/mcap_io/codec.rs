@@ -262,8 +262,9 @@ fn check_raw(image: &RawImage, topic: &str, encodings: &[&str], bytes_per_pixel:
         ));
     }
     let size = ImageSize::new(image.width as usize, image.height as usize);
-    let row_bytes = size.width * bytes_per_pixel;
-    let step = image.step as usize;
+    // u64 arithmetic: u32 width, height and step cannot overflow it, whatever a file claims.
+    let row_bytes = u64::from(image.width) * bytes_per_pixel as u64;
+    let step = u64::from(image.step);
     if step < row_bytes {
         return Err(decode_error(
             topic,
@@ -273,12 +274,11 @@ fn check_raw(image: &RawImage, topic: &str, encodings: &[&str], bytes_per_pixel:
             ),
         ));
     }
-    let needed = if size.height == 0 {
-        0
-    } else {
-        step * (size.height - 1) + row_bytes
+    let needed = match image.height {
+        0 => 0,
+        h => step * u64::from(h - 1) + row_bytes,
     };
-    if image.data.len() < needed {
+    if (image.data.len() as u64) < needed {
         return Err(decode_error(
             topic,
             format!(
@@ -530,6 +530,17 @@ mod tests {
         msg.encoding = "32FC1".into();
         let err = depth_u16_from_raw(&msg, "/d").unwrap_err().to_string();
         assert!(err.contains("16UC1") && err.contains("32FC1"), "{err}");
+    }
+
+    #[test]
+    fn absurd_claimed_sizes_are_errors_not_overflows() {
+        let mut msg = depth_u16_image(0, "cam", &[1, 2], ImageSize::new(2, 1)).unwrap();
+        (msg.width, msg.height, msg.step) = (u32::MAX, u32::MAX, u32::MAX);
+        let err = depth_u16_from_raw(&msg, "/d").unwrap_err().to_string();
+        assert!(err.contains("shorter than"), "{err}");
+        msg.width = 1;
+        let err = depth_u16_from_raw(&msg, "/d").unwrap_err().to_string();
+        assert!(err.contains("found 4"), "{err}");
     }
 
     #[test]
