@@ -41,6 +41,28 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         assert_eq!(per_topic.get(topic), Some(&150), "{topic}: {per_topic:?}");
     }
     assert_eq!(per_topic.get("/tf"), Some(&300));
+    // Real MCAP clients, when `bash .ci/run` provides them (see tests/python_validators.rs).
+    if let Some(python) = std::env::var_os("OCCMASK_PYTHON").map(std::path::PathBuf::from) {
+        let cli = python.with_file_name("pymcap-cli");
+        let doctor = Command::new(&cli)
+            .args(["doctor", "--strict-message-order", "--format", "jsonl"])
+            .arg(&output)
+            .output()
+            .unwrap();
+        let report = String::from_utf8_lossy(&doctor.stdout);
+        assert!(
+            doctor.status.success() && report.contains("\"errors\":0") && report.contains("\"warnings\":0"),
+            "{report}"
+        );
+        let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/validate_mcap.py");
+        let read = Command::new(&python)
+            .arg(script)
+            .arg(&output)
+            .args(["/occmask/mask=150", "/occmask/odometry/pose=150", "/tf=300"])
+            .output()
+            .unwrap();
+        assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    }
     // A second run without --force refuses to overwrite.
     let again = Command::new(env!("CARGO_BIN_EXE_occmask"))
         .args(["demo", "--width", "320", "--output"])

@@ -99,6 +99,10 @@ pub fn run(args: DemoArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     // The ground-truth first pose anchors the estimated trajectory so both overlay in Foxglove.
     let world_from_first = sequence.world_from_camera(0);
     for i in 0..sequence.len() {
+        if super::signals::interrupted() {
+            // Dropping `output` without commit removes the temporary file.
+            anyhow::bail!("interrupted: {} not written", args.output.display());
+        }
         sequence.render_into(i, &mut frame);
         let t = frame.timestamp_ns;
         let out = processor.process(&FrameInput {

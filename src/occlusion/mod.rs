@@ -394,57 +394,37 @@ impl OcclusionDetector {
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
-        object_mask(
-            &self.config,
-            &self.compensated_m,
-            &self.accumulation_m,
-            &mut self.mask,
-        );
-        if self.config.predict_newly_discovered {
-            // P = (P̂ ∨ Ñ) ∧ O, binary (algorithm.md §1 step 12, §5.3).
-            for (((p, &carried), &newly), &object) in self
-                .predicted
-                .as_mut_slice()
-                .iter_mut()
-                .zip(self.predicted_carried.as_slice())
-                .zip(self.newly_discovered.as_slice())
-                .zip(self.mask.as_slice())
-            {
-                *p = u8::from((carried != 0 || newly != 0) && object != 0);
-            }
+        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3).
+        let predicting = self.config.predict_newly_discovered;
+        for ((((m, p), &a), &z), (&carried, &newly)) in self
+            .mask
+            .as_mut_slice()
+            .iter_mut()
+            .zip(self.predicted.as_mut_slice())
+            .zip(self.accumulation_m.as_slice())
+            .zip(self.compensated_m.as_slice())
+            .zip(
+                self.predicted_carried
+                    .as_slice()
+                    .iter()
+                    .zip(self.newly_discovered.as_slice()),
+            )
+        {
+            let object = a > self.config.threshold(self.config.alpha, z);
+            *m = if object { MASK_SET } else { 0 };
+            *p = u8::from(predicting && object && (carried != 0 || newly != 0));
+        }
+        if predicting {
             self.stats.pruned_pixels = self.components.prune_unattached_predictions(
                 self.config.prune_adjacency,
                 &self.predicted,
                 &mut self.mask,
                 &mut self.accumulation_m,
             );
-        } else {
-            self.predicted.fill(0);
         }
         self.stats.mask_pixels = self.mask.as_slice().iter().filter(|&&m| m != 0).count();
         self.stats.prune_us = started.elapsed().as_micros() as u64;
         Ok(&self.mask)
-    }
-}
-
-/// O = {A > τ_α} (algorithm.md §1 step 11).
-fn object_mask(
-    config: &OcclusionConfig,
-    compensated_m: &DepthMeters,
-    accumulation_m: &DepthMeters,
-    mask: &mut Mask,
-) {
-    for ((m, &a), &z) in mask
-        .as_mut_slice()
-        .iter_mut()
-        .zip(accumulation_m.as_slice())
-        .zip(compensated_m.as_slice())
-    {
-        *m = if a > config.threshold(config.alpha, z) {
-            MASK_SET
-        } else {
-            0
-        };
     }
 }
 

@@ -74,7 +74,7 @@ struct PixelOut {
 
 /// Steps 3–9 for one pixel given its nearest warped source index (if valid) and, in
 /// [`WarpDepth::Current`] mode, the depth z′ of the warped point in the previous camera.
-#[inline]
+#[inline(always)]
 fn finish_pixel(
     inputs: &TransportInputs<'_>,
     measured_m: f32,
