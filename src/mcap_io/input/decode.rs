@@ -786,6 +786,29 @@ mod tests {
     }
 
     #[test]
+    fn compressed_depth_png_skips_its_config_header() {
+        let raw = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(2, 1, vec![1500, 0]).unwrap();
+        let mut png = std::io::Cursor::new(Vec::new());
+        raw.write_to(&mut png, image::ImageFormat::Png).unwrap();
+        let mut data = vec![0u8; COMPRESSED_DEPTH_HEADER_BYTES];
+        data.extend_from_slice(png.get_ref());
+        let msg = ImageMsg {
+            timestamp_ns: 1,
+            frame_id: "cam".into(),
+            payload: ImagePayload::Compressed {
+                format: "16UC1; compressedDepth png".into(),
+                data,
+            },
+        };
+        assert!(msg.is_depth());
+        let mut d = DepthMeters::filled(ImageSize::new(1, 1), 9.0);
+        depth_from_image_into(&msg, "/d", 1000.0, &mut d).unwrap();
+        let mut reference = DepthMeters::filled(ImageSize::new(2, 1), 0.0);
+        crate::image_buf::depth_m_from_u16_into(&[1500, 0], 1000.0, &mut reference).unwrap();
+        assert_eq!(d, reference);
+    }
+
+    #[test]
     fn unsupported_encodings_are_named() {
         let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
         let err = gray_from_image_into(&raw("yuv422", 2, 2, vec![0; 4]), "/c", &mut g)
