@@ -1,5 +1,5 @@
 //! `occmask demo` at the process boundary: exit code, printed scores, and an MCAP file with the
-//! convert channels plus the mask and pose outputs.
+//! convert channels plus every channel `occmask process` adds; no temporary file left behind.
 #![allow(clippy::unwrap_used)]
 
 use std::collections::BTreeMap;
@@ -20,7 +20,23 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         "stderr: {}",
         String::from_utf8_lossy(&run.stderr)
     );
-    assert!(stdout.contains("mean F1") && stdout.contains("RPE"), "{stdout}");
+    assert!(
+        stdout.contains("F1 / precision / recall") && stdout.contains("RPE Δ=1"),
+        "{stdout}"
+    );
+    // The closed loop on the dominant object: the bar is F1 >= 0.85.
+    let f1: f64 = stdout
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("F1 / precision / recall"))
+        .and_then(|rest| rest.split('/').next())
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap();
+    assert!(f1 >= 0.85, "F1 {f1}\n{stdout}");
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(leftovers, vec![std::ffi::OsString::from("demo.mcap")]);
     let bytes = std::fs::read(&output).unwrap();
     let mut per_topic: BTreeMap<String, usize> = BTreeMap::new();
     for message in mcap::MessageStream::new(&bytes).unwrap() {
@@ -36,11 +52,18 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         "/groundtruth/pose",
         "/groundtruth/mask",
         "/occmask/mask",
-        "/occmask/odometry/pose",
+        "/occmask/mask_annotations",
+        "/occmask/odometry",
+        "/occmask/stats",
     ] {
         assert_eq!(per_topic.get(topic), Some(&150), "{topic}: {per_topic:?}");
     }
+    // Ground truth and estimate share the input's /tf channel.
     assert_eq!(per_topic.get("/tf"), Some(&300));
+    assert!(
+        per_topic.get("/occmask/path").is_some_and(|&n| n > 0),
+        "{per_topic:?}"
+    );
     // Real MCAP clients, when `bash .ci/run` provides them (see tests/python_validators.rs).
     if let Some(python) = std::env::var_os("OCCMASK_PYTHON").map(std::path::PathBuf::from) {
         let cli = python.with_file_name("pymcap-cli");
@@ -58,7 +81,7 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         let read = Command::new(&python)
             .arg(script)
             .arg(&output)
-            .args(["/occmask/mask=150", "/occmask/odometry/pose=150", "/tf=300"])
+            .args(["/occmask/mask=150", "/occmask/odometry=150", "/tf=300"])
             .output()
             .unwrap();
         assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
