@@ -488,55 +488,6 @@ pub fn convert_sequence<W: Write + Seek>(
     Ok((writer.finish()?, report))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn merge_orders_by_time_then_stream() {
-        let merged = merge_by_time(vec![
-            vec![(5, Event::Groundtruth(0)), (10, Event::Groundtruth(1))],
-            vec![(5, Event::Color(0)), (7, Event::Color(1))],
-            vec![(1, Event::Depth(0)), (10, Event::Depth(1))],
-        ]);
-        assert_eq!(
-            merged,
-            vec![
-                Event::Depth(0),
-                Event::Groundtruth(0),
-                Event::Color(0),
-                Event::Color(1),
-                Event::Groundtruth(1),
-                Event::Depth(1)
-            ]
-        );
-    }
-
-    #[test]
-    fn intrinsics_resolution_order() {
-        let r = resolve_intrinsics(DatasetKind::Tum, "rgbd_dataset_freiburg1_xyz", None).unwrap();
-        assert_eq!(r.intrinsics, presets::TUM_FR1);
-        assert!(!r.is_fallback);
-        let r = resolve_intrinsics(DatasetKind::Tum, "office", None).unwrap();
-        assert_eq!(r.intrinsics, presets::KINECT_DEFAULT);
-        assert!(r.is_fallback);
-        let r = resolve_intrinsics(DatasetKind::Tum, "rgbd_dataset_freiburg1_xyz", Some("fr3")).unwrap();
-        assert_eq!(r.intrinsics, presets::TUM_FR3);
-        assert_eq!(
-            resolve_intrinsics(DatasetKind::Larr, "x", None)
-                .unwrap()
-                .intrinsics,
-            presets::LARR
-        );
-        assert_eq!(
-            resolve_intrinsics(DatasetKind::Icsl, "x", None)
-                .unwrap()
-                .intrinsics,
-            presets::ICSL
-        );
-    }
-}
-
 /// Writes a synthetic sequence ([`crate::synthetic`]) in `convert`'s channel layout: colour as
 /// `rgb8` RawImage, depth `16UC1` at [`crate::synthetic::DEPTH_UNITS_PER_M`], calibration per
 /// image, ground-truth poses, `/tf` and ground-truth masks, all in log-time order. This is a
@@ -590,4 +541,53 @@ pub fn write_synthetic_sequence<W: Write + Seek>(
         ]),
     )?;
     w.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn merge_orders_by_time_then_stream() {
+        let merged = merge_by_time(vec![
+            vec![(5, Event::Groundtruth(0)), (10, Event::Groundtruth(1))],
+            vec![(5, Event::Color(0)), (7, Event::Color(1))],
+            vec![(1, Event::Depth(0)), (10, Event::Depth(1))],
+        ]);
+        assert_eq!(
+            merged,
+            vec![
+                Event::Depth(0),
+                Event::Groundtruth(0),
+                Event::Color(0),
+                Event::Color(1),
+                Event::Groundtruth(1),
+                Event::Depth(1)
+            ]
+        );
+    }
+
+    #[test]
+    fn intrinsics_resolution_order() {
+        let r = resolve_intrinsics(DatasetKind::Tum, "rgbd_dataset_freiburg1_xyz", None).unwrap();
+        assert_eq!(r.intrinsics, presets::TUM_FR1);
+        assert!(!r.is_fallback);
+        let r = resolve_intrinsics(DatasetKind::Tum, "office", None).unwrap();
+        assert_eq!(r.intrinsics, presets::KINECT_DEFAULT);
+        assert!(r.is_fallback);
+        let r = resolve_intrinsics(DatasetKind::Tum, "rgbd_dataset_freiburg1_xyz", Some("fr3")).unwrap();
+        assert_eq!(r.intrinsics, presets::TUM_FR3);
+        assert_eq!(
+            resolve_intrinsics(DatasetKind::Larr, "x", None)
+                .unwrap()
+                .intrinsics,
+            presets::LARR
+        );
+        assert_eq!(
+            resolve_intrinsics(DatasetKind::Icsl, "x", None)
+                .unwrap()
+                .intrinsics,
+            presets::ICSL
+        );
+    }
 }
