@@ -621,7 +621,9 @@ impl SyntheticSequence {
                     origin: object_from_camera.translation.vector,
                     half: b.half_extents_m,
                     moving: b.moves_between(t_s - 1.0 / self.config.fps, t_s),
-                    texture_seed: b.texture_seed,
+                    faces: std::array::from_fn(|face| {
+                        Surface::new(b.texture_seed ^ (face as u64).wrapping_mul(0x9e37))
+                    }),
                 }
             })
             .collect();
@@ -630,6 +632,9 @@ impl SyntheticSequence {
             world_rotation: world_from_camera.rotation.to_rotation_matrix().into_inner(),
             world_origin: world_from_camera.translation.vector,
             room: self.room,
+            room_faces: std::array::from_fn(|face| {
+                Surface::new(self.room.texture_seed ^ (face as u64 + 1).wrapping_mul(0x51_7cc1_b727))
+            }),
             boxes,
         };
         let width = size.width;
@@ -721,7 +726,8 @@ struct BoxInCamera {
     origin: Vector3<f64>,
     half: Vector3<f64>,
     moving: bool,
-    texture_seed: u64,
+    /// Texture of each face, indexed by `2 · axis + (max side)`.
+    faces: [Surface; 6],
 }
 
 struct ViewSetup {
@@ -729,6 +735,8 @@ struct ViewSetup {
     world_rotation: nalgebra::Matrix3<f64>,
     world_origin: Vector3<f64>,
     room: Room,
+    /// Texture of each room face, indexed by `2 · axis + (max side)`.
+    room_faces: [Surface; 6],
     boxes: Vec<BoxInCamera>,
 }
 
@@ -757,10 +765,10 @@ impl ViewSetup {
         if let Some((t, index, axis, point)) = best {
             let b = &self.boxes[index];
             let (u, v) = face_coordinates(&point, axis);
-            let face = (axis * 2 + usize::from(point[axis] > 0.0)) as u64;
+            let face = axis * 2 + usize::from(point[axis] > 0.0);
             return Hit {
                 depth_m: t,
-                rgb: shade(b.texture_seed ^ face.wrapping_mul(0x9e37), u, v),
+                rgb: shade(&b.faces[face], u, v),
                 moving: b.moving,
             };
         }
@@ -768,14 +776,9 @@ impl ViewSetup {
         let (t, axis, positive) = slab_exit(&self.world_origin, &direction, &self.room);
         let point = self.world_origin + direction * t;
         let (u, v) = face_coordinates(&point, axis);
-        let face = (axis * 2 + usize::from(positive)) as u64;
         Hit {
             depth_m: t,
-            rgb: shade(
-                self.room.texture_seed ^ (face + 1).wrapping_mul(0x51_7cc1_b727),
-                u,
-                v,
-            ),
+            rgb: shade(&self.room_faces[axis * 2 + usize::from(positive)], u, v),
             moving: false,
         }
     }
@@ -842,14 +845,30 @@ const TEXTURE_OCTAVES: [(f64, f32); 3] = [(0.45, 0.4), (0.15, 0.35), (0.05, 0.25
 /// Contrast gain applied around mid-gray (value noise sums are concentrated near 0.5).
 const TEXTURE_CONTRAST: f32 = 2.2;
 
+/// Texture of one flat surface (a room or box face), hashed once per frame instead of per
+/// pixel: per-octave lattice seeds and the colour tint.
+struct Surface {
+    octave_seeds: [u64; TEXTURE_OCTAVES.len()],
+    tint: [f32; 3],
+}
+
+impl Surface {
+    fn new(seed: u64) -> Self {
+        Self {
+            octave_seeds: std::array::from_fn(|octave| seed.wrapping_add(octave as u64)),
+            tint: surface_tint(seed),
+        }
+    }
+}
+
 /// Colour of a surface point with texture coordinates (u, v) in metres.
-fn shade(seed: u64, u: f64, v: f64) -> [f32; 3] {
+fn shade(surface: &Surface, u: f64, v: f64) -> [f32; 3] {
     let mut intensity = 0.0;
-    for (octave, &(scale_m, weight)) in TEXTURE_OCTAVES.iter().enumerate() {
-        intensity += weight * value_noise(seed.wrapping_add(octave as u64), u / scale_m, v / scale_m);
+    for (&seed, &(scale_m, weight)) in surface.octave_seeds.iter().zip(&TEXTURE_OCTAVES) {
+        intensity += weight * value_noise(seed, u / scale_m, v / scale_m);
     }
     let intensity = (0.5 + TEXTURE_CONTRAST * (intensity - 0.5)).clamp(0.03, 0.97);
-    let tint = surface_tint(seed);
+    let tint = surface.tint;
     [intensity * tint[0], intensity * tint[1], intensity * tint[2]]
 }
 
