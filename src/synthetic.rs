@@ -628,7 +628,12 @@ impl SyntheticSequence {
             })
             .collect();
         let view = ViewSetup {
-            intrinsics,
+            ray_x: (0..size.width)
+                .map(|x| (x as f64 - intrinsics.cx) / intrinsics.fx)
+                .collect(),
+            ray_y: (0..size.height)
+                .map(|y| (y as f64 - intrinsics.cy) / intrinsics.fy)
+                .collect(),
             world_rotation: world_from_camera.rotation.to_rotation_matrix().into_inner(),
             world_origin: world_from_camera.translation.vector,
             room: self.room,
@@ -731,7 +736,10 @@ struct BoxInCamera {
 }
 
 struct ViewSetup {
-    intrinsics: PinholeIntrinsics,
+    /// Camera-frame ray x component of each image column ((x − cx) / fx), computed once per frame.
+    ray_x: Vec<f64>,
+    /// Camera-frame ray y component of each image row ((y − cy) / fy).
+    ray_y: Vec<f64>,
     world_rotation: nalgebra::Matrix3<f64>,
     world_origin: Vector3<f64>,
     room: Room,
@@ -751,8 +759,7 @@ impl ViewSetup {
     /// Casts the ray of pixel (x, y). The ray direction has z = 1 in the camera frame, so the
     /// ray parameter is the depth.
     fn cast(&self, x: usize, y: usize) -> Hit {
-        let k = &self.intrinsics;
-        let ray_in_camera = Vector3::new((x as f64 - k.cx) / k.fx, (y as f64 - k.cy) / k.fy, 1.0);
+        let ray_in_camera = Vector3::new(self.ray_x[x], self.ray_y[y], 1.0);
         let mut best: Option<(f64, usize, usize, Vector3<f64>)> = None;
         for (index, b) in self.boxes.iter().enumerate() {
             let direction = b.rotation * ray_in_camera;
