@@ -621,15 +621,25 @@ impl SyntheticSequence {
                     origin: object_from_camera.translation.vector,
                     half: b.half_extents_m,
                     moving: b.moves_between(t_s - 1.0 / self.config.fps, t_s),
-                    texture_seed: b.texture_seed,
+                    faces: std::array::from_fn(|face| {
+                        Surface::new(b.texture_seed ^ (face as u64).wrapping_mul(0x9e37))
+                    }),
                 }
             })
             .collect();
         let view = ViewSetup {
-            intrinsics,
+            ray_x: (0..size.width)
+                .map(|x| (x as f64 - intrinsics.cx) / intrinsics.fx)
+                .collect(),
+            ray_y: (0..size.height)
+                .map(|y| (y as f64 - intrinsics.cy) / intrinsics.fy)
+                .collect(),
             world_rotation: world_from_camera.rotation.to_rotation_matrix().into_inner(),
             world_origin: world_from_camera.translation.vector,
             room: self.room,
+            room_faces: std::array::from_fn(|face| {
+                Surface::new(self.room.texture_seed ^ (face as u64 + 1).wrapping_mul(0x51_7cc1_b727))
+            }),
             boxes,
         };
         let width = size.width;
@@ -721,14 +731,20 @@ struct BoxInCamera {
     origin: Vector3<f64>,
     half: Vector3<f64>,
     moving: bool,
-    texture_seed: u64,
+    /// Texture of each face, indexed by `2 · axis + (max side)`.
+    faces: [Surface; 6],
 }
 
 struct ViewSetup {
-    intrinsics: PinholeIntrinsics,
+    /// Camera-frame ray x component of each image column ((x − cx) / fx), computed once per frame.
+    ray_x: Vec<f64>,
+    /// Camera-frame ray y component of each image row ((y − cy) / fy).
+    ray_y: Vec<f64>,
     world_rotation: nalgebra::Matrix3<f64>,
     world_origin: Vector3<f64>,
     room: Room,
+    /// Texture of each room face, indexed by `2 · axis + (max side)`.
+    room_faces: [Surface; 6],
     boxes: Vec<BoxInCamera>,
 }
 
@@ -743,8 +759,7 @@ impl ViewSetup {
     /// Casts the ray of pixel (x, y). The ray direction has z = 1 in the camera frame, so the
     /// ray parameter is the depth.
     fn cast(&self, x: usize, y: usize) -> Hit {
-        let k = &self.intrinsics;
-        let ray_in_camera = Vector3::new((x as f64 - k.cx) / k.fx, (y as f64 - k.cy) / k.fy, 1.0);
+        let ray_in_camera = Vector3::new(self.ray_x[x], self.ray_y[y], 1.0);
         let mut best: Option<(f64, usize, usize, Vector3<f64>)> = None;
         for (index, b) in self.boxes.iter().enumerate() {
             let direction = b.rotation * ray_in_camera;
@@ -757,10 +772,10 @@ impl ViewSetup {
         if let Some((t, index, axis, point)) = best {
             let b = &self.boxes[index];
             let (u, v) = face_coordinates(&point, axis);
-            let face = (axis * 2 + usize::from(point[axis] > 0.0)) as u64;
+            let face = axis * 2 + usize::from(point[axis] > 0.0);
             return Hit {
                 depth_m: t,
-                rgb: shade(b.texture_seed ^ face.wrapping_mul(0x9e37), u, v),
+                rgb: shade(&b.faces[face], u, v),
                 moving: b.moving,
             };
         }
@@ -768,14 +783,9 @@ impl ViewSetup {
         let (t, axis, positive) = slab_exit(&self.world_origin, &direction, &self.room);
         let point = self.world_origin + direction * t;
         let (u, v) = face_coordinates(&point, axis);
-        let face = (axis * 2 + usize::from(positive)) as u64;
         Hit {
             depth_m: t,
-            rgb: shade(
-                self.room.texture_seed ^ (face + 1).wrapping_mul(0x51_7cc1_b727),
-                u,
-                v,
-            ),
+            rgb: shade(&self.room_faces[axis * 2 + usize::from(positive)], u, v),
             moving: false,
         }
     }
@@ -842,14 +852,30 @@ const TEXTURE_OCTAVES: [(f64, f32); 3] = [(0.45, 0.4), (0.15, 0.35), (0.05, 0.25
 /// Contrast gain applied around mid-gray (value noise sums are concentrated near 0.5).
 const TEXTURE_CONTRAST: f32 = 2.2;
 
+/// Texture of one flat surface (a room or box face), hashed once per frame instead of per
+/// pixel: per-octave lattice seeds and the colour tint.
+struct Surface {
+    octave_seeds: [u64; TEXTURE_OCTAVES.len()],
+    tint: [f32; 3],
+}
+
+impl Surface {
+    fn new(seed: u64) -> Self {
+        Self {
+            octave_seeds: std::array::from_fn(|octave| seed.wrapping_add(octave as u64)),
+            tint: surface_tint(seed),
+        }
+    }
+}
+
 /// Colour of a surface point with texture coordinates (u, v) in metres.
-fn shade(seed: u64, u: f64, v: f64) -> [f32; 3] {
+fn shade(surface: &Surface, u: f64, v: f64) -> [f32; 3] {
     let mut intensity = 0.0;
-    for (octave, &(scale_m, weight)) in TEXTURE_OCTAVES.iter().enumerate() {
-        intensity += weight * value_noise(seed.wrapping_add(octave as u64), u / scale_m, v / scale_m);
+    for (&seed, &(scale_m, weight)) in surface.octave_seeds.iter().zip(&TEXTURE_OCTAVES) {
+        intensity += weight * value_noise(seed, u / scale_m, v / scale_m);
     }
     let intensity = (0.5 + TEXTURE_CONTRAST * (intensity - 0.5)).clamp(0.03, 0.97);
-    let tint = surface_tint(seed);
+    let tint = surface.tint;
     [intensity * tint[0], intensity * tint[1], intensity * tint[2]]
 }
 
