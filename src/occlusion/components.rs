@@ -97,8 +97,63 @@ impl Components {
     }
 
     /// Flood-fills the 8-connected component of `seed` (labels must hold UNLABELLED on set
-    /// pixels) with `id`, leaving its pixels in `self.component`.
+    /// pixels) with `id`, leaving its pixels in `self.component` (in scanline-run order; every
+    /// consumer of `self.component` is order-independent). Scanline algorithm: each popped seed
+    /// is extended to its whole horizontal run, and the rows above and below are scanned once
+    /// over the run's 8-neighbourhood, pushing one seed per unlabelled segment. Reference:
+    /// [`Components::flood_scalar`].
     fn flood(&mut self, seed: usize, id: u32) {
+        let (width, height) = (self.width, self.height);
+        let labels = &mut self.labels;
+        self.component.clear();
+        self.stack.clear();
+        self.stack.push(seed as u32);
+        while let Some(p) = self.stack.pop() {
+            let p = p as usize;
+            if labels[p] != UNLABELLED {
+                continue;
+            }
+            let y = p / width;
+            let row_start = y * width;
+            let mut left = p;
+            while left > row_start && labels[left - 1] == UNLABELLED {
+                left -= 1;
+            }
+            let mut right = p;
+            while right + 1 < row_start + width && labels[right + 1] == UNLABELLED {
+                right += 1;
+            }
+            for q in left..=right {
+                labels[q] = id;
+                self.component.push(q as u32);
+            }
+            // 8-adjacency: the neighbour rows are scanned one column beyond the run on each side.
+            let x_first = (left - row_start).saturating_sub(1);
+            let x_last = (right - row_start + 1).min(width - 1);
+            for ny in [y.wrapping_sub(1), y + 1] {
+                if ny >= height {
+                    continue;
+                }
+                let neighbour_row = &labels[ny * width..(ny + 1) * width];
+                let mut x = x_first;
+                while x <= x_last {
+                    if neighbour_row[x] == UNLABELLED {
+                        self.stack.push((ny * width + x) as u32);
+                        while x <= x_last && neighbour_row[x] == UNLABELLED {
+                            x += 1;
+                        }
+                    } else {
+                        x += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Reference flood fill: depth-first over the 8 neighbours of every pixel (for the
+    /// agreement test of [`Components::flood`]).
+    #[cfg(test)]
+    fn flood_scalar(&mut self, seed: usize, id: u32) {
         let (width, height) = (self.width, self.height);
         self.component.clear();
         self.stack.clear();
@@ -430,6 +485,52 @@ fn square_filter_scalar(image: &[u8], width: usize, height: usize, r: usize, ero
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Labels every component of `set` with `fill` and returns the labels and each component's
+    /// sorted pixels.
+    fn label_all(set: &[u8], size: ImageSize, scanline: bool) -> (Vec<u32>, Vec<Vec<u32>>) {
+        let mut components = Components::new(size);
+        for (l, &v) in components.labels.iter_mut().zip(set) {
+            *l = if v != 0 { UNLABELLED } else { 0 };
+        }
+        let mut found = Vec::new();
+        let mut id = 0;
+        for seed in 0..set.len() {
+            if components.labels[seed] == UNLABELLED {
+                id += 1;
+                if scanline {
+                    components.flood(seed, id);
+                } else {
+                    components.flood_scalar(seed, id);
+                }
+                let mut pixels = components.component.clone();
+                pixels.sort_unstable();
+                found.push(pixels);
+            }
+        }
+        (components.labels, found)
+    }
+
+    #[test]
+    fn scanline_flood_fill_matches_the_reference() {
+        let size = ImageSize::new(53, 31);
+        let mut state = 987654321u64;
+        for density in [3u64, 4, 6] {
+            let set: Vec<u8> = (0..size.area())
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    u8::from((state >> 33) % 10 < density)
+                })
+                .collect();
+            let (fast_labels, fast_components) = label_all(&set, size, true);
+            let (slow_labels, slow_components) = label_all(&set, size, false);
+            assert!(slow_components.len() > 1, "density {density}");
+            assert_eq!(fast_labels, slow_labels, "density {density}");
+            assert_eq!(fast_components, slow_components, "density {density}");
+        }
+    }
 
     #[test]
     fn sliding_square_filter_matches_the_definition() {
