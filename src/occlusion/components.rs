@@ -123,10 +123,8 @@ impl Components {
             while right + 1 < row_start + width && labels[right + 1] == UNLABELLED {
                 right += 1;
             }
-            for q in left..=right {
-                labels[q] = id;
-                self.component.push(q as u32);
-            }
+            labels[left..=right].fill(id);
+            self.component.extend(left as u32..=right as u32);
             // 8-adjacency: the neighbour rows are scanned one column beyond the run on each side.
             let x_first = (left - row_start).saturating_sub(1);
             let x_last = (right - row_start + 1).min(width - 1);
