@@ -349,13 +349,18 @@ impl Components {
             let ring = next_epoch(&mut self.candidate_epoch, &mut self.candidate_stamp);
             self.candidates.clear();
             for &f in &self.frontier {
-                let (x, y) = (f as usize % width, f as usize / width);
-                for &(dx, dy) in &NEIGHBOURS_4 {
-                    let Some(n) = neighbour(x, y, dx, dy, width, height) else {
-                        continue;
-                    };
-                    let (nx, ny) = (n % width, n / width);
-                    let interior = nx > 0 && ny > 0 && nx + 1 < width && ny + 1 < height;
+                let f = f as usize;
+                let (x, y) = (f % width, f / width);
+                // The 4-neighbours in NEIGHBOURS_4 order, each with "is interior" (x and y in
+                // 1..size−1), evaluated before the target lookup; no division per neighbour.
+                let (x_interior, y_interior) = (x > 0 && x + 1 < width, y > 0 && y + 1 < height);
+                let neighbours = [
+                    (f.wrapping_sub(1), y_interior && x >= 2),
+                    (f + 1, y_interior && x + 2 < width),
+                    (f.wrapping_sub(width), x_interior && y >= 2),
+                    (f + width, x_interior && y + 2 < height),
+                ];
+                for (n, interior) in neighbours {
                     if interior && self.target[n] != 0 && self.candidate_stamp[n] != ring {
                         self.candidate_stamp[n] = ring;
                         self.candidates.push(n as u32);
