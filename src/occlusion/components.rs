@@ -20,6 +20,15 @@ const NEIGHBOURS_8: [(isize, isize); 8] = [
     (1, 1),
 ];
 
+/// Inclusive bounding box of a pixel set.
+#[derive(Debug, Clone, Copy)]
+struct Bounds {
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+}
+
 /// Counts of one labelling/prediction pass.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct LabelStats {
@@ -97,8 +106,61 @@ impl Components {
     }
 
     /// Flood-fills the 8-connected component of `seed` (labels must hold UNLABELLED on set
-    /// pixels) with `id`, leaving its pixels in `self.component`.
+    /// pixels) with `id`, leaving its pixels in `self.component` (in scanline-run order; every
+    /// consumer of `self.component` is order-independent). Scanline algorithm: each popped seed
+    /// is extended to its whole horizontal run, and the rows above and below are scanned once
+    /// over the run's 8-neighbourhood, pushing one seed per unlabelled segment. Reference:
+    /// [`Components::flood_scalar`].
     fn flood(&mut self, seed: usize, id: u32) {
+        let (width, height) = (self.width, self.height);
+        let labels = &mut self.labels;
+        self.component.clear();
+        self.stack.clear();
+        self.stack.push(seed as u32);
+        while let Some(p) = self.stack.pop() {
+            let p = p as usize;
+            if labels[p] != UNLABELLED {
+                continue;
+            }
+            let y = p / width;
+            let row_start = y * width;
+            let mut left = p;
+            while left > row_start && labels[left - 1] == UNLABELLED {
+                left -= 1;
+            }
+            let mut right = p;
+            while right + 1 < row_start + width && labels[right + 1] == UNLABELLED {
+                right += 1;
+            }
+            labels[left..=right].fill(id);
+            self.component.extend(left as u32..=right as u32);
+            // 8-adjacency: the neighbour rows are scanned one column beyond the run on each side.
+            let x_first = (left - row_start).saturating_sub(1);
+            let x_last = (right - row_start + 1).min(width - 1);
+            for ny in [y.wrapping_sub(1), y + 1] {
+                if ny >= height {
+                    continue;
+                }
+                let neighbour_row = &labels[ny * width..(ny + 1) * width];
+                let mut x = x_first;
+                while x <= x_last {
+                    if neighbour_row[x] == UNLABELLED {
+                        self.stack.push((ny * width + x) as u32);
+                        while x <= x_last && neighbour_row[x] == UNLABELLED {
+                            x += 1;
+                        }
+                    } else {
+                        x += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Reference flood fill: depth-first over the 8 neighbours of every pixel (for the
+    /// agreement test of [`Components::flood`]).
+    #[cfg(test)]
+    fn flood_scalar(&mut self, seed: usize, id: u32) {
         let (width, height) = (self.width, self.height);
         self.component.clear();
         self.stack.clear();
@@ -130,23 +192,51 @@ impl Components {
         accumulation_m: &mut DepthMeters,
     ) -> LabelStats {
         let mut stats = LabelStats::default();
-        // Object set O₀ is fixed before any prediction writes into A.
-        for ((label, &a), &z) in self
+        // Object set O₀ is fixed before any prediction writes into A. The pass also finds the
+        // set's bounding box: the opening and the seed scan only visit it.
+        let width = self.width;
+        let mut bounds: Option<Bounds> = None;
+        for (y, ((labels, a_row), z_row)) in self
             .labels
-            .iter_mut()
-            .zip(accumulation_m.as_slice())
-            .zip(compensated_m.as_slice())
+            .chunks_exact_mut(width)
+            .zip(accumulation_m.as_slice().chunks_exact(width))
+            .zip(compensated_m.as_slice().chunks_exact(width))
+            .enumerate()
         {
-            *label = if a > config.threshold(config.alpha, z) {
-                UNLABELLED
-            } else {
-                0
-            };
+            let (mut first, mut last) = (usize::MAX, 0);
+            for (x, ((label, &a), &z)) in labels.iter_mut().zip(a_row).zip(z_row).enumerate() {
+                let set = a > config.threshold(config.alpha, z);
+                *label = if set { UNLABELLED } else { 0 };
+                if set {
+                    first = first.min(x);
+                    last = x;
+                }
+            }
+            if first != usize::MAX {
+                bounds = Some(match bounds {
+                    None => Bounds {
+                        x0: first,
+                        x1: last,
+                        y0: y,
+                        y1: y,
+                    },
+                    Some(b) => Bounds {
+                        x0: b.x0.min(first),
+                        x1: b.x1.max(last),
+                        y0: b.y0,
+                        y1: y,
+                    },
+                });
+            }
         }
+        let Some(bounds) = bounds else {
+            return stats;
+        };
         if config.thin_structure_radius_px > 0 {
             stats.thin_pixels_erased = self.erase_thin_structures(
                 config.thin_structure_radius_px,
                 config.thin_structure_border_margin_px,
+                bounds,
                 accumulation_m,
             );
         }
@@ -154,7 +244,7 @@ impl Components {
             self.target.copy_from_slice(newly_discovered.as_slice());
         }
         let mut next_id = 0u32;
-        for seed in 0..self.labels.len() {
+        for seed in bounds.y0 * width..(bounds.y1 + 1) * width {
             if self.labels[seed] != UNLABELLED {
                 continue;
             }
@@ -183,45 +273,53 @@ impl Components {
         &mut self,
         radius: usize,
         border_margin_px: usize,
+        bounds: Bounds,
         accumulation_m: &mut DepthMeters,
     ) -> usize {
         let (width, height) = (self.width, self.height);
-        for (m, &l) in self.morph_a.iter_mut().zip(&self.labels) {
-            *m = u8::from(l != 0);
+        // The opening runs on the set's bounding box only, copied to a compact image: pixels
+        // outside the box are background, both in the set and in its erosion (a subset of the
+        // set), which is exactly how the filter treats pixels outside its image.
+        let (box_width, box_height) = (bounds.x1 - bounds.x0 + 1, bounds.y1 - bounds.y0 + 1);
+        let box_area = box_width * box_height;
+        for (m_row, l_row) in self.morph_a[..box_area]
+            .chunks_exact_mut(box_width)
+            .zip(self.labels.chunks_exact(width).skip(bounds.y0))
+        {
+            for (m, &l) in m_row.iter_mut().zip(&l_row[bounds.x0..=bounds.x1]) {
+                *m = u8::from(l != 0);
+            }
         }
         // Erosion (outside the image counts as background), then dilation.
-        let counts = &mut self.column_counts;
-        square_filter(
-            &mut self.morph_a,
-            &mut self.morph_b,
-            counts,
-            width,
-            height,
-            radius,
-            true,
-        );
-        square_filter(
-            &mut self.morph_a,
-            &mut self.morph_b,
-            counts,
-            width,
-            height,
-            radius,
-            false,
-        );
+        let counts = &mut self.column_counts[..box_width];
+        for erode in [true, false] {
+            square_filter(
+                &mut self.morph_a[..box_area],
+                &mut self.morph_b[..box_area],
+                counts,
+                box_width,
+                box_height,
+                radius,
+                erode,
+            );
+        }
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
-        for (i, (label, &opened)) in self.labels.iter_mut().zip(&self.morph_a).enumerate() {
-            if *label != 0 && opened == 0 {
-                let (x, y) = (i % width, i / width);
-                let interior = x >= border_margin_px
-                    && y >= border_margin_px
-                    && x + border_margin_px < width
-                    && y + border_margin_px < height;
-                if interior {
-                    *label = 0;
-                    a[i] = 0.0;
-                    erased += 1;
+        for (box_y, opened_row) in self.morph_a[..box_area].chunks_exact(box_width).enumerate() {
+            let y = bounds.y0 + box_y;
+            for (box_x, &opened) in opened_row.iter().enumerate() {
+                let x = bounds.x0 + box_x;
+                let i = y * width + x;
+                if self.labels[i] != 0 && opened == 0 {
+                    let interior = x >= border_margin_px
+                        && y >= border_margin_px
+                        && x + border_margin_px < width
+                        && y + border_margin_px < height;
+                    if interior {
+                        self.labels[i] = 0;
+                        a[i] = 0.0;
+                        erased += 1;
+                    }
                 }
             }
         }
@@ -251,13 +349,18 @@ impl Components {
             let ring = next_epoch(&mut self.candidate_epoch, &mut self.candidate_stamp);
             self.candidates.clear();
             for &f in &self.frontier {
-                let (x, y) = (f as usize % width, f as usize / width);
-                for &(dx, dy) in &NEIGHBOURS_4 {
-                    let Some(n) = neighbour(x, y, dx, dy, width, height) else {
-                        continue;
-                    };
-                    let (nx, ny) = (n % width, n / width);
-                    let interior = nx > 0 && ny > 0 && nx + 1 < width && ny + 1 < height;
+                let f = f as usize;
+                let (x, y) = (f % width, f / width);
+                // The 4-neighbours in NEIGHBOURS_4 order, each with "is interior" (x and y in
+                // 1..size−1), evaluated before the target lookup; no division per neighbour.
+                let (x_interior, y_interior) = (x > 0 && x + 1 < width, y > 0 && y + 1 < height);
+                let neighbours = [
+                    (f.wrapping_sub(1), y_interior && x >= 2),
+                    (f + 1, y_interior && x + 2 < width),
+                    (f.wrapping_sub(width), x_interior && y >= 2),
+                    (f + width, x_interior && y + 2 < height),
+                ];
+                for (n, interior) in neighbours {
                     if interior && self.target[n] != 0 && self.candidate_stamp[n] != ring {
                         self.candidate_stamp[n] = ring;
                         self.candidates.push(n as u32);
@@ -430,6 +533,95 @@ fn square_filter_scalar(image: &[u8], width: usize, height: usize, r: usize, ero
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Labels every component of `set` with `fill` and returns the labels and each component's
+    /// sorted pixels.
+    fn label_all(set: &[u8], size: ImageSize, scanline: bool) -> (Vec<u32>, Vec<Vec<u32>>) {
+        let mut components = Components::new(size);
+        for (l, &v) in components.labels.iter_mut().zip(set) {
+            *l = if v != 0 { UNLABELLED } else { 0 };
+        }
+        let mut found = Vec::new();
+        let mut id = 0;
+        for seed in 0..set.len() {
+            if components.labels[seed] == UNLABELLED {
+                id += 1;
+                if scanline {
+                    components.flood(seed, id);
+                } else {
+                    components.flood_scalar(seed, id);
+                }
+                let mut pixels = components.component.clone();
+                pixels.sort_unstable();
+                found.push(pixels);
+            }
+        }
+        (components.labels, found)
+    }
+
+    #[test]
+    fn scanline_flood_fill_matches_the_reference() {
+        let size = ImageSize::new(53, 31);
+        let mut state = 987654321u64;
+        for density in [3u64, 4, 6] {
+            let set: Vec<u8> = (0..size.area())
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    u8::from((state >> 33) % 10 < density)
+                })
+                .collect();
+            let (fast_labels, fast_components) = label_all(&set, size, true);
+            let (slow_labels, slow_components) = label_all(&set, size, false);
+            assert!(slow_components.len() > 1, "density {density}");
+            assert_eq!(fast_labels, slow_labels, "density {density}");
+            assert_eq!(fast_components, slow_components, "density {density}");
+        }
+    }
+
+    #[test]
+    fn thin_structure_opening_on_the_bounding_box_matches_the_whole_image() {
+        let size = ImageSize::new(61, 47);
+        let mut state = 555u64;
+        // A blob with noisy edges and thin strips inside [10, 50) × [5, 40).
+        let set: Vec<u8> = (0..size.area())
+            .map(|i| {
+                let (x, y) = (i % size.width, i / size.width);
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let inside = (10..50).contains(&x) && (5..40).contains(&y);
+                u8::from(inside && (state >> 33) % 10 < 7)
+            })
+            .collect();
+        let bounding = Bounds {
+            x0: 10,
+            x1: 49,
+            y0: 5,
+            y1: 39,
+        };
+        let whole = Bounds {
+            x0: 0,
+            x1: size.width - 1,
+            y0: 0,
+            y1: size.height - 1,
+        };
+        for (radius, margin) in [(1, 0), (1, 12), (2, 3)] {
+            let run = |bounds: Bounds| {
+                let mut components = Components::new(size);
+                for (l, &v) in components.labels.iter_mut().zip(&set) {
+                    *l = if v != 0 { UNLABELLED } else { 0 };
+                }
+                let mut a = DepthMeters::filled(size, 1.0);
+                let erased = components.erase_thin_structures(radius, margin, bounds, &mut a);
+                (erased, components.labels, a.into_vec())
+            };
+            let (fast, slow) = (run(bounding), run(whole));
+            assert!(slow.0 > 0, "radius {radius}");
+            assert_eq!(fast, slow, "radius {radius} margin {margin}");
+        }
+    }
 
     #[test]
     fn sliding_square_filter_matches_the_definition() {

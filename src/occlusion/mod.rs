@@ -395,7 +395,10 @@ impl OcclusionDetector {
 
         let started = Instant::now();
         // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3).
+        // The same pass counts O and P: pruning only removes pixels of P ⊆ O, so the mask
+        // size is |O| − pruned, and pruning is skipped when P is empty.
         let predicting = self.config.predict_newly_discovered;
+        let (mut object_pixels, mut predicted_pixels) = (0usize, 0usize);
         for ((((m, p), &a), &z), (&carried, &newly)) in self
             .mask
             .as_mut_slice()
@@ -411,10 +414,13 @@ impl OcclusionDetector {
             )
         {
             let object = a > self.config.threshold(self.config.alpha, z);
+            let predicted = predicting && object && (carried != 0 || newly != 0);
             *m = if object { MASK_SET } else { 0 };
-            *p = u8::from(predicting && object && (carried != 0 || newly != 0));
+            *p = u8::from(predicted);
+            object_pixels += usize::from(object);
+            predicted_pixels += usize::from(predicted);
         }
-        if predicting {
+        if predicted_pixels > 0 {
             self.stats.pruned_pixels = self.components.prune_unattached_predictions(
                 self.config.prune_adjacency,
                 &self.predicted,
@@ -422,7 +428,11 @@ impl OcclusionDetector {
                 &mut self.accumulation_m,
             );
         }
-        self.stats.mask_pixels = self.mask.as_slice().iter().filter(|&&m| m != 0).count();
+        self.stats.mask_pixels = object_pixels - self.stats.pruned_pixels;
+        debug_assert_eq!(
+            self.stats.mask_pixels,
+            self.mask.as_slice().iter().filter(|&&m| m != 0).count()
+        );
         self.stats.prune_us = started.elapsed().as_micros() as u64;
         Ok(&self.mask)
     }

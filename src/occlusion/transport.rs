@@ -61,59 +61,6 @@ pub struct TransportCounts {
     pub newly_discovered: usize,
 }
 
-/// Everything one pixel's transport produces.
-#[derive(Clone, Copy)]
-struct PixelOut {
-    compensated_m: f32,
-    accumulation_m: f32,
-    predicted_carried: u8,
-    delta_z_m: f32,
-    newly_discovered: u8,
-    warped: bool,
-}
-
-/// Steps 3–9 for one pixel given its nearest warped source index (if valid) and, in
-/// [`WarpDepth::Current`] mode, the depth z′ of the warped point in the previous camera.
-#[inline(always)]
-fn finish_pixel(
-    inputs: &TransportInputs<'_>,
-    measured_m: f32,
-    source: Option<usize>,
-    warped_depth_m: Option<f32>,
-) -> PixelOut {
-    let config = inputs.config;
-    let (sampled_m, accumulation_carried, predicted_carried) = match source {
-        Some(n) => (
-            inputs.compensated_previous_m.as_slice()[n],
-            inputs.accumulation_previous_m.as_slice()[n],
-            inputs.predicted_previous.as_slice()[n],
-        ),
-        None => (0.0, 0.0, 0),
-    };
-    let compensated_m = if measured_m > 0.0 { measured_m } else { sampled_m };
-    let compared_m = warped_depth_m.unwrap_or(compensated_m);
-    let delta_z_m = if source.is_some() {
-        sampled_m - compared_m
-    } else {
-        0.0
-    };
-    let mut accumulation_m = accumulation_carried + delta_z_m;
-    if accumulation_m <= config.threshold(config.alpha, compensated_m) {
-        accumulation_m = 0.0;
-    }
-    if delta_z_m <= -config.threshold(config.beta, compensated_m) {
-        accumulation_m = 0.0;
-    }
-    PixelOut {
-        compensated_m,
-        accumulation_m,
-        predicted_carried,
-        delta_z_m,
-        newly_discovered: u8::from(compensated_m > 0.0 && sampled_m == 0.0),
-        warped: source.is_some(),
-    }
-}
-
 /// The fused row-parallel transport kernel.
 pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) -> TransportCounts {
     let width = inputs.depth_m.width();
@@ -127,7 +74,12 @@ pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) ->
     let translation = inputs.previous_from_current.translation.vector;
     let k = inputs.intrinsics;
     let geometric = inputs.config.warp_depth == WarpDepth::Current;
+    let column0 = rotation.column(0);
     let chunk = ROWS_PER_TASK * width;
+    let config = inputs.config;
+    let previous_zc = inputs.compensated_previous_m.as_slice();
+    let previous_a = inputs.accumulation_previous_m.as_slice();
+    let previous_p = inputs.predicted_previous.as_slice();
     outputs
         .compensated_m
         .as_mut_slice()
@@ -151,15 +103,22 @@ pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) ->
                 let ray_y = inputs.ray_y[y];
                 // R·(rx, ry, 1) = rx·R[:,0] + (ry·R[:,1] + R[:,2]); the bracket is constant per row.
                 let row_term = rotation.column(1) * ray_y + rotation.column(2);
-                let column0 = rotation.column(0);
                 let previous_row = inputs.compensated_previous_m.row(y);
                 let measured_row = inputs.depth_m.row(y);
-                for x in 0..width {
-                    let measured = measured_row[x];
+                for (x, ((((((zc, a), p), dz), n), &measured), &previous)) in zc_row
+                    .iter_mut()
+                    .zip(a_row.iter_mut())
+                    .zip(p_row.iter_mut())
+                    .zip(dz_row.iter_mut())
+                    .zip(n_row.iter_mut())
+                    .zip(measured_row)
+                    .zip(previous_row)
+                    .enumerate()
+                {
                     let use_current = geometric && measured > 0.0;
-                    let z_back_projected = if use_current { measured } else { previous_row[x] } as f64;
-                    let mut source = None;
-                    let mut warped_depth = None;
+                    let z_back_projected = if use_current { measured } else { previous } as f64;
+                    let mut source = usize::MAX;
+                    let mut warped_depth_m = 0.0f32;
                     if z_back_projected > 0.0 {
                         let z = z_back_projected;
                         let ray_x = inputs.ray_x[x];
@@ -171,19 +130,40 @@ pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) ->
                             let v = k.fy * qy / qz + k.cy;
                             if (0.0..=max_x).contains(&u) && (0.0..=max_y).contains(&v) {
                                 // Nearest pixel: both coordinates are ≥ 0, so +0.5 and truncation round.
-                                source = Some((v + 0.5) as usize * width + (u + 0.5) as usize);
-                                warped_depth = use_current.then_some(qz as f32);
+                                source = (v + 0.5) as usize * width + (u + 0.5) as usize;
+                                warped_depth_m = qz as f32;
                             }
                         }
                     }
-                    let out = finish_pixel(inputs, measured, source, warped_depth);
-                    zc_row[x] = out.compensated_m;
-                    a_row[x] = out.accumulation_m;
-                    p_row[x] = out.predicted_carried;
-                    dz_row[x] = out.delta_z_m;
-                    n_row[x] = out.newly_discovered;
-                    counts.warped += usize::from(out.warped);
-                    counts.newly_discovered += usize::from(out.newly_discovered != 0);
+                    // Steps 3–9 (as `finish_pixel`, inlined on hoisted slices).
+                    let warped = source != usize::MAX;
+                    let (sampled_m, accumulation_carried, predicted_carried) = if warped {
+                        (previous_zc[source], previous_a[source], previous_p[source])
+                    } else {
+                        (0.0, 0.0, 0)
+                    };
+                    let compensated_m = if measured > 0.0 { measured } else { sampled_m };
+                    let compared_m = if use_current && warped {
+                        warped_depth_m
+                    } else {
+                        compensated_m
+                    };
+                    let delta_z_m = if warped { sampled_m - compared_m } else { 0.0 };
+                    let mut accumulation_m = accumulation_carried + delta_z_m;
+                    if accumulation_m <= config.threshold(config.alpha, compensated_m) {
+                        accumulation_m = 0.0;
+                    }
+                    if delta_z_m <= -config.threshold(config.beta, compensated_m) {
+                        accumulation_m = 0.0;
+                    }
+                    let newly = compensated_m > 0.0 && sampled_m == 0.0;
+                    *zc = compensated_m;
+                    *a = accumulation_m;
+                    *p = predicted_carried;
+                    *dz = delta_z_m;
+                    *n = u8::from(newly);
+                    counts.warped += usize::from(warped);
+                    counts.newly_discovered += usize::from(newly);
                 }
             }
             counts
