@@ -328,16 +328,13 @@ pub fn rgb8_from_raw(image: &RawImage, topic: &str) -> Result<Rgb8> {
     }))
 }
 
-/// Pinhole intrinsics and image size from a `CameraCalibration` (distortion is ignored).
+/// Pinhole intrinsics from a row-major 3×3 camera matrix `k`, shared by every calibration
+/// decoder. `hint` is appended to the error (e.g. which flag supplies intrinsics instead).
 ///
 /// # Errors
-/// [`Error::Decode`] naming `topic` when `K` does not have 9 entries or is not a valid
+/// [`Error::Decode`] naming `topic` when `k` does not have 9 entries or is not a valid
 /// pinhole matrix (positive focal lengths, zero skew, last row 0 0 1).
-pub fn intrinsics_from_calibration(
-    calibration: &CameraCalibration,
-    topic: &str,
-) -> Result<(PinholeIntrinsics, ImageSize)> {
-    let k = &calibration.k;
+pub fn intrinsics_from_k(k: &[f64], topic: &str, hint: &str) -> Result<PinholeIntrinsics> {
     if k.len() != 9 {
         return Err(decode_error(
             topic,
@@ -348,9 +345,22 @@ pub fn intrinsics_from_calibration(
     if !intrinsics.is_valid() || k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
         return Err(decode_error(
             topic,
-            format!("expected a pinhole K [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0, found {k:?}"),
+            format!("expected a pinhole K [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0, found {k:?}{hint}"),
         ));
     }
+    Ok(intrinsics)
+}
+
+/// Pinhole intrinsics and image size from a `CameraCalibration` (distortion is ignored).
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` when `K` does not have 9 entries or is not a valid
+/// pinhole matrix (positive focal lengths, zero skew, last row 0 0 1).
+pub fn intrinsics_from_calibration(
+    calibration: &CameraCalibration,
+    topic: &str,
+) -> Result<(PinholeIntrinsics, ImageSize)> {
+    let intrinsics = intrinsics_from_k(&calibration.k, topic, "")?;
     Ok((
         intrinsics,
         ImageSize::new(calibration.width as usize, calibration.height as usize),

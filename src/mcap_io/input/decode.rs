@@ -179,24 +179,11 @@ impl CalibrationMsg {
     /// [`Error::Decode`] naming `topic` when K is not a 3×3 pinhole matrix with positive focal
     /// lengths (a zero K means "uncalibrated" in ROS).
     pub fn intrinsics(&self, topic: &str) -> Result<PinholeIntrinsics> {
-        let k = &self.k;
-        if k.len() != 9 {
-            return Err(decode_error(
-                topic,
-                format!("expected a 3x3 K (9 numbers), found {} numbers", k.len()),
-            ));
-        }
-        let intrinsics = PinholeIntrinsics::new(k[0], k[4], k[2], k[5]);
-        if !intrinsics.is_valid() || k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
-            return Err(decode_error(
-                topic,
-                format!(
-                    "expected a pinhole K [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0, found {k:?} \
-                     (an all-zero K means the camera is uncalibrated: pass --camera FX,FY,CX,CY)"
-                ),
-            ));
-        }
-        Ok(intrinsics)
+        crate::mcap_io::codec::intrinsics_from_k(
+            &self.k,
+            topic,
+            " (an all-zero K means the camera is uncalibrated: pass --camera FX,FY,CX,CY)",
+        )
     }
 }
 
