@@ -27,7 +27,7 @@ use crate::mcap_io::input::decode::{
     decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
 };
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
-use crate::mcap_io::input::{McapInput, RawMessage};
+use crate::mcap_io::input::{McapInput, RawMessage, Truncation};
 use crate::mcap_io::DEPTH_UNITS_KEY;
 use crate::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
 use crate::time::split_ns;
@@ -188,6 +188,12 @@ pub struct ProcessReport {
     pub new_messages: u64,
     /// The input ended early (unfinished recording); everything readable was used.
     pub input_truncated: bool,
+    /// Where a truncated input was cut and what was lost.
+    pub input_truncation: Option<Truncation>,
+    /// Colour/depth pairs whose stamp is not after the previous processed frame's (stamps
+    /// going backwards or duplicated): skipped, since odometry and the detector need time
+    /// order.
+    pub out_of_order_frames: u64,
     /// The estimated trajectory (colour stamps).
     pub trajectory: Vec<StampedPose>,
 }
@@ -295,6 +301,44 @@ impl Pairer {
 
     fn oldest_color_log_time(&self) -> Option<u64> {
         self.color.iter().map(|q| q.log_time_ns).min()
+    }
+}
+
+/// Metadata keys describing a truncated input (`input_truncated`, `input_intact_bytes`,
+/// `input_lost_bytes`, `input_messages_lost`, and `input_lost_log_time` when known).
+pub fn truncation_metadata(t: &Truncation) -> Vec<(String, String)> {
+    let mut v = vec![
+        ("input_truncated".to_owned(), "true".to_owned()),
+        ("input_intact_bytes".to_owned(), t.intact_bytes.to_string()),
+        ("input_lost_bytes".to_owned(), t.lost_bytes.to_string()),
+        ("input_messages_lost".to_owned(), (!t.messages_intact).to_string()),
+    ];
+    if let Some((a, b)) = t.lost_log_time_range {
+        v.push((
+            "input_lost_log_time".to_owned(),
+            format!(
+                "{}..{}",
+                crate::time::format_ns_as_seconds(a, 6),
+                crate::time::format_ns_as_seconds(b, 6)
+            ),
+        ));
+    }
+    v
+}
+
+/// Adds which message failed (log time and sequence number, as a player shows them) to a
+/// decode error, so the user can find the frame.
+fn at_message(error: Error, header: &mcap::records::MessageHeader) -> Error {
+    match error {
+        Error::Decode { topic, message } => Error::Decode {
+            topic,
+            message: format!(
+                "message at log time {} s (sequence {}): {message}",
+                crate::time::format_ns_as_seconds(header.log_time, 6),
+                header.sequence
+            ),
+        },
+        other => other,
     }
 }
 
@@ -428,7 +472,7 @@ pub fn process_file<W: Write + Seek>(
     };
 
     let mut writer = AnnotatedWriter::new(sink, input, &config.annotate)?;
-    let metadata = BTreeMap::from([
+    let mut metadata = BTreeMap::from([
         ("tool".to_owned(), crate::mcap_io::LIBRARY.to_owned()),
         ("pose_source".to_owned(), config.pose_mode.as_str().to_owned()),
         ("color_topic".to_owned(), topics.color.topic.clone()),
@@ -442,6 +486,10 @@ pub fn process_file<W: Write + Seek>(
         ),
         (DEPTH_UNITS_KEY.to_owned(), depth_units_per_meter.to_string()),
     ]);
+    if let Some(t) = input.truncation() {
+        // Recorded only for damaged inputs, so complete inputs keep their exact bytes.
+        metadata.extend(truncation_metadata(t));
+    }
     writer.write_metadata(METADATA_PROCESS, metadata)?;
 
     let color_ct = topics.color.channel_type.ok_or_else(|| Error::Decode {
@@ -485,6 +533,8 @@ pub fn process_file<W: Write + Seek>(
             copied_messages: 0,
             new_messages: 0,
             input_truncated: input.is_truncated(),
+            input_truncation: input.truncation().copied(),
+            out_of_order_frames: 0,
             trajectory: Vec::new(),
         },
     };
@@ -509,16 +559,19 @@ pub fn process_file<W: Write + Seek>(
         } else {
             (depth_ct, &topics.depth.topic)
         };
-        let msg = decode_image(ct, topic, &m.data)?;
-        let pixels = if is_color {
-            let mut gray = GrayF32::filled(ImageSize::new(0, 0), 0.0);
-            gray_from_image_into(&msg, topic, &mut gray)?;
-            Pixels::Gray(gray)
-        } else {
-            let mut depth = DepthMeters::filled(ImageSize::new(0, 0), 0.0);
-            depth_from_image_into(&msg, topic, depth_units_per_meter, &mut depth)?;
-            Pixels::Depth(depth)
-        };
+        let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
+            let pixels = if is_color {
+                let mut gray = GrayF32::filled(ImageSize::new(0, 0), 0.0);
+                gray_from_image_into(&msg, topic, &mut gray)?;
+                Pixels::Gray(gray)
+            } else {
+                let mut depth = DepthMeters::filled(ImageSize::new(0, 0), 0.0);
+                depth_from_image_into(&msg, topic, depth_units_per_meter, &mut depth)?;
+                Pixels::Depth(depth)
+            };
+            Ok((msg, pixels))
+        });
+        let (msg, pixels) = decoded.map_err(|e| at_message(e, &m.header))?;
         Ok(Some((
             is_color,
             Queued {
@@ -649,6 +702,15 @@ impl FrameLoop {
         let after_end = ctx.config.end_offset_ns.is_some_and(|e| offset >= e);
         if before_start || after_end {
             self.report.outside_time_range += 1;
+            return Ok(());
+        }
+        if self
+            .report
+            .trajectory
+            .last()
+            .is_some_and(|p| stamp <= p.timestamp_ns)
+        {
+            self.report.out_of_order_frames += 1;
             return Ok(());
         }
         let external = if ctx.config.pose_mode == PoseMode::External {
