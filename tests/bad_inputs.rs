@@ -22,7 +22,7 @@ use occmask::image_buf::ImageSize;
 use process_support::{fixture_bytes, FixtureSpec, Flavor, FRAME_NS, T0_NS};
 use prost::Message as _;
 
-use common::{entries, occmask, stderr};
+use common::{entries, occmask, stderr, tum_from_fixture};
 
 /// Big enough for the DVO pyramid, small enough to be quick (8 frames).
 fn spec() -> FixtureSpec {
@@ -731,4 +731,176 @@ fn eval_bad_inputs() {
         let args = os(&[&"eval", &path]);
         check(name, &args, &inputs, dir, &keep, &expect);
     }
+}
+
+/// A damaged TUM folder for `convert`.
+struct ConvertCase {
+    name: &'static str,
+    damage: fn(&Path),
+    expect: Expect,
+}
+
+fn first_entry(dir: &Path) -> PathBuf {
+    dir.join(&entries(dir)[0])
+}
+
+fn convert_cases() -> Vec<ConvertCase> {
+    fn edit_gt(dir: &Path, field: usize, value: &str) {
+        let gt = dir.join("groundtruth.txt");
+        let text = std::fs::read_to_string(&gt).unwrap();
+        let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+        let i = lines.iter().position(|l| !l.starts_with('#')).unwrap();
+        let mut fields: Vec<&str> = lines[i].split_whitespace().collect();
+        fields[field] = value;
+        lines[i] = fields.join(" ");
+        std::fs::write(&gt, lines.join("\n")).unwrap();
+    }
+    vec![
+        ConvertCase {
+            name: "ground-truth pose with NaN",
+            damage: |d| edit_gt(d, 1, "nan"),
+            expect: Expect::Fails(&["groundtruth.txt", "line", "finite"]),
+        },
+        ConvertCase {
+            name: "ground-truth pose with Inf",
+            damage: |d| edit_gt(d, 3, "inf"),
+            expect: Expect::Fails(&["groundtruth.txt", "line", "finite"]),
+        },
+        ConvertCase {
+            name: "zero-length colour image",
+            damage: |d| std::fs::write(first_entry(&d.join("rgb")), b"").unwrap(),
+            expect: Expect::Fails(&["rgb/", ".png", "expected a PNG or JPEG colour image"]),
+        },
+        ConvertCase {
+            name: "zero-length depth image",
+            damage: |d| std::fs::write(first_entry(&d.join("depth")), b"").unwrap(),
+            expect: Expect::Fails(&["depth/", ".png", "no PNG signature"]),
+        },
+        ConvertCase {
+            name: "zero-length depth.txt",
+            damage: |d| std::fs::write(d.join("depth.txt"), b"").unwrap(),
+            expect: Expect::Fails(&["depth.txt", "empty sequence"]),
+        },
+        ConvertCase {
+            name: "directory where rgb.txt was expected",
+            damage: |d| {
+                std::fs::remove_file(d.join("rgb.txt")).unwrap();
+                std::fs::create_dir(d.join("rgb.txt")).unwrap();
+            },
+            expect: Expect::Fails(&["rgb.txt", "found a directory"]),
+        },
+        ConvertCase {
+            name: "directory where groundtruth.txt was expected",
+            damage: |d| {
+                std::fs::remove_file(d.join("groundtruth.txt")).unwrap();
+                std::fs::create_dir(d.join("groundtruth.txt")).unwrap();
+            },
+            expect: Expect::Fails(&["groundtruth.txt", "found a directory"]),
+        },
+        ConvertCase {
+            name: "directory where a colour image was expected",
+            damage: |d| {
+                let f = first_entry(&d.join("rgb"));
+                std::fs::remove_file(&f).unwrap();
+                std::fs::create_dir(&f).unwrap();
+            },
+            expect: Expect::Fails(&["rgb/", ".png", "is a directory, expected an image file", "line 3"]),
+        },
+    ]
+}
+
+#[test]
+fn convert_bad_input_corpus() {
+    run_all(
+        convert_cases(),
+        |c| c.name,
+        |case| {
+            let tmp = tempfile::tempdir().unwrap();
+            let dir = tum_from_fixture(tmp.path(), "tum_fr2_mini");
+            (case.damage)(&dir);
+            let inputs: Vec<PathBuf> = walk(&dir);
+            let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+            let out_dir = tmp.path().join("out");
+            std::fs::create_dir(&out_dir).unwrap();
+            let args = os(&[&"convert", &"tum", &dir, &"-o", &out_dir.join("out.mcap")]);
+            check(case.name, &args, &inputs, &out_dir, &[], &case.expect);
+        },
+    );
+}
+
+/// Every file under `dir`.
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[test]
+fn convert_output_problems() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tum_from_fixture(tmp.path(), "tum_fr2_mini");
+    let inputs: Vec<PathBuf> = walk(&dir);
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    let out_dir = tmp.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let rgb_txt = dir.join("rgb.txt");
+
+    let args = os(&[&"convert", &"tum", &dir, &"-o", &"/dev/full", &"--force"]);
+    let e = Expect::Fails(&["/dev/full", "a regular file"]);
+    check("/dev/full as output", &args, &inputs, &out_dir, &[], &e);
+
+    let args = os(&[&"convert", &"tum", &dir, &"-o", &rgb_txt.join("o.mcap")]);
+    let e = Expect::Fails(&["rgb.txt/o.mcap", "cannot create temporary output file"]);
+    check("output under a regular file", &args, &inputs, &out_dir, &[], &e);
+
+    // An existing file (here one of the inputs) is only replaced with --force.
+    let args = os(&[&"convert", &"tum", &dir, &"-o", &rgb_txt]);
+    let e = Expect::Fails(&["rgb.txt", "--force"]);
+    check(
+        "output is an existing input file",
+        &args,
+        &inputs,
+        &out_dir,
+        &[],
+        &e,
+    );
+
+    let out = occmask_with_file_limit(
+        &os(&[&"convert", &"tum", &dir, &"-o", &out_dir.join("o.mcap")]),
+        32 * 1024,
+    );
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(
+        err.lines()
+            .any(|l| l.starts_with("error: ") && l.contains("o.mcap") && l.contains("too large")),
+        "{err}"
+    );
+    assert!(entries(&out_dir).is_empty(), "{:?}", entries(&out_dir));
+
+    // Zero focal length is a usage error (exit 2) naming the option.
+    let out = occmask(&os(&[
+        &"convert",
+        &"tum",
+        &dir,
+        &"-o",
+        &out_dir.join("o.mcap"),
+        &"--camera",
+        &"0,525,319.5,239.5",
+    ]));
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--camera") && err.contains("0,525,319.5,239.5"),
+        "{err}"
+    );
+    assert!(entries(&out_dir).is_empty());
 }
