@@ -507,6 +507,24 @@ fn process_bad_input_corpus() {
             check(case.name, &args, &[&input], &out_dir, &[], &case.expect);
             if !matches!(case.expect, Expect::Fails(_)) {
                 assert!(output.is_file(), "{}: no output", case.name);
+                // A truncated input leaves its trace in the output's metadata record.
+                let meta = process_metadata(&output);
+                let truncated = case.name.starts_with("truncated");
+                assert_eq!(
+                    meta.get("input_truncated").is_some(),
+                    truncated,
+                    "{}: {meta:?}",
+                    case.name
+                );
+                if case.name == "truncated inside a chunk" {
+                    assert_eq!(meta["input_messages_lost"], "true", "{meta:?}");
+                    let lost: u64 = meta["input_lost_bytes"].parse().unwrap();
+                    assert!(lost > 0, "{meta:?}");
+                    assert!(meta.contains_key("input_lost_log_time"), "{meta:?}");
+                }
+                if case.name == "truncated inside the summary" {
+                    assert_eq!(meta["input_messages_lost"], "false", "{meta:?}");
+                }
                 let eval = occmask(&os(&[&"eval", &output]));
                 assert_eq!(
                     eval.status.code(),
@@ -518,6 +536,23 @@ fn process_bad_input_corpus() {
             }
         },
     );
+}
+
+/// The `occmask.process` metadata record of an output file.
+fn process_metadata(path: &Path) -> BTreeMap<String, String> {
+    use occmask::mcap_io::input::{ExtraRecord, McapInput};
+    let input = McapInput::open(path).unwrap();
+    input
+        .extras()
+        .unwrap()
+        .into_iter()
+        .find_map(|e| match e {
+            ExtraRecord::Metadata(m) if m.name == occmask::mcap_io::annotate::METADATA_PROCESS => {
+                Some(m.metadata)
+            }
+            _ => None,
+        })
+        .unwrap()
 }
 
 /// Runs a command with the file size limited to `max_bytes` (SIGXFSZ ignored, so writes past it
@@ -903,4 +938,115 @@ fn convert_output_problems() {
         "{err}"
     );
     assert!(entries(&out_dir).is_empty());
+}
+
+/// Starts `occmask args` in `cwd`, waits until its temporary output appears in `cwd` (so it
+/// is writing), lets it run `after` more, sends `signal`, and returns its output.
+#[cfg(unix)]
+fn interrupt(args: &[OsString], cwd: &Path, signal: libc::c_int, after: std::time::Duration) -> Output {
+    use std::time::{Duration, Instant};
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while !entries(cwd).iter().any(|e| e.ends_with(".tmp")) {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "finished before it could be interrupted"
+        );
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no temporary file appeared"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    std::thread::sleep(after);
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "finished before it could be interrupted"
+    );
+    let pid = libc::pid_t::try_from(child.id()).unwrap();
+    // SAFETY: sending a signal to our own running child.
+    assert_eq!(unsafe { libc::kill(pid, signal) }, 0);
+    child.wait_with_output().unwrap()
+}
+
+#[cfg(unix)]
+fn assert_interrupted(name: &str, out: &Output, cwd: &Path, keep: &[&str]) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(130), "{name}: {err}");
+    assert!(!err.contains("panicked"), "{name}: {err}");
+    assert!(
+        err.lines()
+            .any(|l| l.starts_with("error: ") && l.contains("interrupted")),
+        "{name}: {err}"
+    );
+    let left: Vec<String> = entries(cwd)
+        .into_iter()
+        .filter(|e| !keep.contains(&e.as_str()))
+        .collect();
+    assert!(left.is_empty(), "{name}: left behind {left:?}");
+}
+
+/// SIGINT and SIGTERM during `process` and `convert`: exit 130, nothing left behind, and a
+/// re-run writes the same bytes as a run that was never interrupted.
+#[cfg(unix)]
+#[test]
+fn interrupted_runs_leave_nothing_and_rerun_identically() {
+    use std::time::Duration;
+    let desk = common::shared_data("tum_fr2_desk_50");
+    let tmp = tempfile::tempdir().unwrap();
+    // Each run happens in its own directory with the same relative output name, so the
+    // command lines (recorded in convert's metadata) are identical.
+    let reference = tmp.path().join("reference");
+    let work = tmp.path().join("work");
+    std::fs::create_dir(&reference).unwrap();
+    std::fs::create_dir(&work).unwrap();
+    let convert = os(&[&"convert", &"tum", &desk, &"-o", &"desk.mcap", &"-q"]);
+
+    // convert: SIGTERM mid-run (SIGINT is covered by convert_cli.rs), then re-run.
+    let out = occmask_in(&convert, &reference);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let out = interrupt(&convert, &work, libc::SIGTERM, Duration::from_millis(20));
+    assert_interrupted("convert SIGTERM", &out, &work, &[]);
+    let out = occmask_in(&convert, &work);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let desk_mcap = std::fs::read(work.join("desk.mcap")).unwrap();
+    assert!(
+        desk_mcap == std::fs::read(reference.join("desk.mcap")).unwrap(),
+        "convert re-run differs"
+    );
+
+    // process: the first second of the recording (30 frames) keeps this quick.
+    let input = tmp.path().join("desk.mcap");
+    std::fs::write(&input, &desk_mcap).unwrap();
+    let process = os(&[&"process", &input, &"-o", &"out.mcap", &"--end", &"1", &"-q"]);
+    let out = occmask_in(&process, &reference);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    for (name, signal) in [
+        ("process SIGINT", libc::SIGINT),
+        ("process SIGTERM", libc::SIGTERM),
+    ] {
+        let out = interrupt(&process, &work, signal, Duration::from_millis(300));
+        assert_interrupted(name, &out, &work, &["desk.mcap"]);
+    }
+    assert_eq!(std::fs::read(&input).unwrap(), desk_mcap, "input changed");
+    let out = occmask_in(&process, &work);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        std::fs::read(work.join("out.mcap")).unwrap() == std::fs::read(reference.join("out.mcap")).unwrap(),
+        "process re-run differs"
+    );
+}
+
+fn occmask_in(args: &[OsString], cwd: &Path) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
 }

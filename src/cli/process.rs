@@ -481,6 +481,19 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
             Ok(_) => {}
         }
     }
+    if super::signals::interrupted() {
+        // Exit code 130 (main looks for Error::Interrupted): files finished before the signal
+        // are complete; the unfinished ones removed their temporary output.
+        let done = results.len() - failed;
+        return Err(anyhow::Error::new(occmask::Error::Interrupted {
+            done,
+            total: results.len(),
+        }))
+        .context(format!(
+            "stopped by a signal: {done} of {} files were finished and kept",
+            results.len()
+        ));
+    }
     if failed > 0 {
         bail!("{failed} of {} files failed", results.len());
     }
