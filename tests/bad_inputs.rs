@@ -511,7 +511,7 @@ fn process_bad_input_corpus() {
                 let meta = process_metadata(&output);
                 let truncated = case.name.starts_with("truncated");
                 assert_eq!(
-                    meta.get("input_truncated").is_some(),
+                    meta.contains_key("input_truncated"),
                     truncated,
                     "{}: {meta:?}",
                     case.name
