@@ -313,6 +313,19 @@ fn process_cases() -> Vec<ProcessCase> {
             expect: Expect::Fails(&["in.mcap", "damaged chunk at byte", "lz4", "mcap recover"]),
         },
         ProcessCase {
+            name: "chunk CRC mismatch (zstd chunk that still decompresses)",
+            bytes: || {
+                let mut b = rewrite_with(&good(), Some(mcap::Compression::Zstd), |_, _, d| Some(d));
+                let (chunks, _) = layout(&b);
+                // The CRC field of the chunk header: opcode, length, start, end, size.
+                let at = chunks[0].0 as usize + 1 + 8 + 8 + 8 + 8;
+                b[at] ^= 0x01;
+                b
+            },
+            extra: &[],
+            expect: Expect::Fails(&["in.mcap", "damaged chunk at byte", "zstd", "CRC mismatch"]),
+        },
+        ProcessCase {
             name: "chunk CRC mismatch (uncompressed chunk)",
             bytes: || {
                 let mut b = rewrite_with(&good(), None, |_, _, d| Some(d));

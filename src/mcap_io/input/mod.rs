@@ -592,6 +592,13 @@ impl McapInput {
             options = options.starting_at(start).ending_before(end);
         }
         let mut reader = IndexedReader::new_with_options(summary, options)?;
+        let crc: SharedCrc = Arc::default();
+        for name in ["zstd", "lz4"] {
+            reader.add_decompressor(CheckedDecompressor {
+                name,
+                crc: Arc::clone(&crc),
+            })?;
+        }
         let mut file = open_file(&self.path)?;
         let mut chunk = Vec::new();
         while let Some(event) = reader.next_event() {
@@ -612,13 +619,24 @@ impl McapInput {
                         .and_then(|_| file.read_exact(&mut chunk))
                         .map_err(|e| Error::io("cannot read MCAP chunk", &self.path, e))?;
                     let (header, data) = chunk.split_at(header_len);
-                    if let Some(index) = index {
-                        check_chunk_header(header, data, index)
-                            .map_err(|m| self.chunk_error(Some(index), &m))?;
+                    let expected_crc = match index {
+                        Some(index) => {
+                            chunk_header_crc(header).map_err(|m| self.chunk_error(Some(index), &m))?
+                        }
+                        None => 0,
+                    };
+                    if let Ok(mut c) = crc.lock() {
+                        *c = None;
                     }
                     reader
                         .insert_chunk_record_data(offset, data)
                         .map_err(|e| self.chunk_error(index, &e.to_string()))?;
+                    let found = if index.is_some_and(|i| i.compression.is_empty()) {
+                        Some(crc32fast::hash(data))
+                    } else {
+                        crc.lock().ok().and_then(|c| *c)
+                    };
+                    check_crc(expected_crc, found).map_err(|m| self.chunk_error(index, &m))?;
                 }
                 IndexedReadEvent::Message { header, data } => {
                     let keep_going = f(RawMessage {
@@ -635,34 +653,79 @@ impl McapInput {
     }
 }
 
+/// CRC of the last chunk a [`CheckedDecompressor`] decompressed, shared with the reading loop.
+type SharedCrc = Arc<std::sync::Mutex<Option<u32>>>;
+
+/// Decompresses whole zstd or lz4 chunks (the indexed reader hands over a complete chunk and
+/// an output buffer of its declared size) and records the CRC-32 of the output, so the
+/// chunk's CRC is checked for compressed chunks too: a flipped bit that still decompresses
+/// would otherwise go unnoticed.
+struct CheckedDecompressor {
+    name: &'static str,
+    crc: SharedCrc,
+}
+
+impl mcap::sans_io::decompressor::Decompressor for CheckedDecompressor {
+    fn next_read_size(&self) -> usize {
+        0
+    }
+
+    fn decompress(
+        &mut self,
+        src: &[u8],
+        dst: &mut [u8],
+    ) -> mcap::McapResult<mcap::sans_io::decompressor::DecompressResult> {
+        let bad = |e: std::io::Error| mcap::McapError::DecompressionError(format!("{} data: {e}", self.name));
+        let wrote = if self.name == "zstd" {
+            zstd::bulk::Decompressor::new()
+                .and_then(|mut d| d.decompress_to_buffer(src, dst))
+                .map_err(bad)?
+        } else {
+            let mut decoder = lz4::Decoder::new(src).map_err(bad)?;
+            decoder.read_exact(dst).map_err(bad)?;
+            dst.len()
+        };
+        if let Ok(mut crc) = self.crc.lock() {
+            *crc = Some(crc32fast::hash(&dst[..wrote]));
+        }
+        Ok(mcap::sans_io::decompressor::DecompressResult {
+            consumed: src.len(),
+            wrote,
+        })
+    }
+
+    fn reset(&mut self) -> mcap::McapResult<()> {
+        Ok(())
+    }
+
+    fn name(&self) -> &'static str {
+        self.name
+    }
+}
+
 /// Byte offset of the uncompressed-data CRC inside a chunk record: opcode, record length,
 /// message start and end time, uncompressed size.
 const CHUNK_CRC_OFFSET: usize = 1 + 8 + 8 + 8 + 8;
 
-/// Checks a chunk record's header against its index entry, and the CRC of an uncompressed
-/// chunk's data (compressed chunks are checked by their decompressor: zstd and lz4 reject
-/// corrupt frames).
-fn check_chunk_header(
-    header: &[u8],
-    data: &[u8],
-    index: &mcap::records::ChunkIndex,
-) -> std::result::Result<(), String> {
+/// Checks a chunk record's header and returns the CRC of its uncompressed data (0 = not
+/// computed, per the MCAP specification).
+fn chunk_header_crc(header: &[u8]) -> std::result::Result<u32, String> {
     if header.len() < CHUNK_CRC_OFFSET + 4 || header[0] != mcap::records::op::CHUNK {
         return Err("expected a chunk record at the offset its index gives".into());
     }
     let mut crc = [0u8; 4];
     crc.copy_from_slice(&header[CHUNK_CRC_OFFSET..CHUNK_CRC_OFFSET + 4]);
-    let expected = u32::from_le_bytes(crc);
-    // A CRC of 0 means "not computed" (MCAP specification).
-    if index.compression.is_empty() && expected != 0 {
-        let found = crc32fast::hash(data);
-        if found != expected {
-            return Err(format!(
-                "CRC mismatch: expected {expected:#010x} from the chunk header, computed {found:#010x}"
-            ));
-        }
+    Ok(u32::from_le_bytes(crc))
+}
+
+fn check_crc(expected: u32, found: Option<u32>) -> std::result::Result<(), String> {
+    match found {
+        Some(found) if expected != 0 && found != expected => Err(format!(
+            "CRC mismatch: expected {expected:#010x} from the chunk header, computed {found:#010x} \
+             from its data"
+        )),
+        _ => Ok(()),
     }
-    Ok(())
 }
 
 impl McapInput {
