@@ -729,11 +729,37 @@ fn check_crc(expected: u32, found: Option<u32>) -> std::result::Result<(), Strin
 }
 
 impl McapInput {
+    /// Messages a chunk holds, from its message index records (which follow the chunk, so they
+    /// usually survive damage to it); `None` when they cannot be read.
+    fn chunk_message_count(&self, index: &mcap::records::ChunkIndex) -> Option<u64> {
+        // Message index record: opcode, record length, channel ID (u16), then the byte length of
+        // its (log time, offset) pairs of 16 bytes each.
+        const PREFIX_BYTES: usize = 1 + 8 + 2 + 4;
+        const ENTRY_BYTES: u64 = 16;
+        let mut file = File::open(&self.path).ok()?;
+        let mut total = 0;
+        for offset in index.message_index_offsets.values() {
+            let mut prefix = [0u8; PREFIX_BYTES];
+            file.seek(SeekFrom::Start(*offset)).ok()?;
+            file.read_exact(&mut prefix).ok()?;
+            if prefix[0] != mcap::records::op::MESSAGE_INDEX {
+                return None;
+            }
+            let mut len = [0u8; 4];
+            len.copy_from_slice(&prefix[11..15]);
+            total += u64::from(u32::from_le_bytes(len)) / ENTRY_BYTES;
+        }
+        Some(total)
+    }
+
     fn chunk_error(&self, index: Option<&mcap::records::ChunkIndex>, what: &str) -> Error {
         let place = match index {
             Some(c) => format!(
-                "chunk at byte {} (messages logged from {} to {} s, compression {:?})",
+                "chunk at byte {}{} (messages logged from {} to {} s, compression {:?})",
                 c.chunk_start_offset,
+                self.chunk_message_count(c)
+                    .map(|n| format!(" holding {n} messages"))
+                    .unwrap_or_default(),
                 crate::time::format_ns_as_seconds(c.message_start_time, 6),
                 crate::time::format_ns_as_seconds(c.message_end_time, 6),
                 c.compression
