@@ -216,8 +216,10 @@ fn from_json<'a, T: serde::Deserialize<'a>>(data: &'a [u8], topic: &str, what: &
 }
 
 fn from_cdr<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str) -> Result<T> {
-    // The `cdr` crate reads the 4-byte encapsulation header (little- or big-endian XCDR1).
-    cdr::deserialize::<T>(data).map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
+    // Reads the 4-byte encapsulation header (little- or big-endian XCDR1), then the fields,
+    // checking declared lengths against the message before allocating (cdr_read.rs).
+    super::cdr_read::from_bytes::<T>(data)
+        .map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
 }
 
 fn proto_ns(stamp: Option<&foxglove::messages::Timestamp>) -> u64 {
