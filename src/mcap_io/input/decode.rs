@@ -7,6 +7,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
+use crate::mcap_io::codec::decode_compressed_pixels;
 use crate::time::join_ns;
 
 use super::{json, ros2};
@@ -534,6 +535,13 @@ fn unsupported(topic: &str, what: &str, found: &str, supported: &str) -> Error {
 /// Checks row step and data length of a raw image; returns its size.
 fn raw_rows(topic: &str, width: u32, height: u32, step: u32, bpp: usize, len: usize) -> Result<ImageSize> {
     let size = ImageSize::new(width as usize, height as usize);
+    if size.area() == 0 {
+        // A 0×N image would pass the length checks with no data and loop over N empty rows.
+        return Err(decode_error(
+            topic,
+            format!("image is {size}: expected at least one pixel"),
+        ));
+    }
     let row_bytes = size.width * bpp;
     let step = step as usize;
     if step < row_bytes {
@@ -615,8 +623,7 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
             } else {
                 return Err(unsupported(topic, "colour", format, SUPPORTED_COLOR_ENCODINGS));
             };
-            let decoded = image::load_from_memory_with_format(data, image_format)
-                .map_err(|e| decode_error(topic, format!("cannot decode {format} image: {e}")))?;
+            let decoded = decode_compressed_pixels(data, image_format, topic, &format!("{format} image"))?;
             let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
             resize_for(gray, size);
             if decoded.color().channel_count() <= 2 {
@@ -699,9 +706,8 @@ pub fn depth_from_image_into(
                 return Err(unsupported(topic, "depth", format, SUPPORTED_DEPTH_ENCODINGS));
             }
             let png = data.get(COMPRESSED_DEPTH_HEADER_BYTES..).unwrap_or_default();
-            let decoded = image::load_from_memory_with_format(png, image::ImageFormat::Png)
-                .map_err(|e| decode_error(topic, format!("cannot decode {format} depth PNG: {e}")))?
-                .into_luma16();
+            let what = format!("{format} depth PNG");
+            let decoded = decode_compressed_pixels(png, image::ImageFormat::Png, topic, &what)?.into_luma16();
             let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
             resize_for(depth_m, size);
             for (o, v) in depth_m.as_mut_slice().iter_mut().zip(decoded.as_raw()) {
@@ -812,6 +818,80 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("8UC1") && err.contains("32FC1"), "{err}");
+    }
+
+    #[test]
+    fn zero_sized_raw_images_are_rejected_before_any_row_loop() {
+        // 0 × u32::MAX passed every length check with no data and then looped over 4 billion
+        // empty rows (fuzz/regressions/*/slow-zero-width-4g-rows).
+        let msg = ImageMsg {
+            timestamp_ns: 1,
+            frame_id: "cam".into(),
+            payload: ImagePayload::Raw {
+                width: 0,
+                height: u32::MAX,
+                encoding: "mono8".into(),
+                step: 0,
+                big_endian: false,
+                data: Vec::new(),
+            },
+        };
+        let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        let err = gray_from_image_into(&msg, "/c", &mut g).unwrap_err().to_string();
+        assert!(
+            err.contains("/c") && err.contains("0x4294967295") && err.contains("at least one pixel"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn compressed_images_declaring_huge_sizes_are_rejected_before_decoding() {
+        // A PNG header declaring 20000×20000 made the decoder allocate 400 MB for a 60-byte
+        // message before failing on the missing pixel data.
+        let header = |w: u32, h: u32| {
+            let buf = image::GrayImage::new(1, 1);
+            let mut png = std::io::Cursor::new(Vec::new());
+            buf.write_to(&mut png, image::ImageFormat::Png).unwrap();
+            let mut png = png.into_inner();
+            // IHDR data starts after the signature (8), length (4) and type (4).
+            png[16..20].copy_from_slice(&w.to_be_bytes());
+            png[20..24].copy_from_slice(&h.to_be_bytes());
+            let crc = crc32(&png[12..29]);
+            png[29..33].copy_from_slice(&crc.to_be_bytes());
+            png
+        };
+        let msg = |data| ImageMsg {
+            timestamp_ns: 1,
+            frame_id: "cam".into(),
+            payload: ImagePayload::Compressed {
+                format: "png".into(),
+                data,
+            },
+        };
+        let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        let err = gray_from_image_into(&msg(header(20_000, 20_000)), "/c", &mut g)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("20000x20000") && err.contains("/c"), "{err}");
+        // The same header with the real 1×1 size still decodes.
+        gray_from_image_into(&msg(header(1, 1)), "/c", &mut g).unwrap();
+        assert_eq!(g.size(), ImageSize::new(1, 1));
+    }
+
+    /// CRC-32 (PNG chunk checksum), bitwise.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
     }
 
     #[test]
