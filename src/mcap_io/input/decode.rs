@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
 use crate::mcap_io::codec::decode_compressed_pixels;
-use crate::time::join_ns;
+use crate::time::{checked_join_ns, join_ns};
 
 use super::{json, ros2};
 
@@ -232,7 +232,16 @@ fn json_ns(t: json::Time, topic: &str) -> Result<u64> {
         .ok()
         .filter(|&n| n < 1_000_000_000)
         .ok_or_else(|| decode_error(topic, format!("expected timestamp nsec < 1e9, found {}", t.nsec)))?;
-    Ok(join_ns(t.sec, nsec))
+    // JSON seconds are 64-bit: 2^64 ns is only ~584 years, so a corrupt stamp must not wrap.
+    checked_join_ns(t.sec, nsec).ok_or_else(|| {
+        decode_error(
+            topic,
+            format!(
+                "expected a timestamp below 2^64 ns (about 1.8e10 s), found sec = {}",
+                t.sec
+            ),
+        )
+    })
 }
 
 fn ros_ns(t: ros2::Time, topic: &str) -> Result<u64> {
@@ -920,6 +929,18 @@ mod tests {
         let mut d = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
         depth_from_image_into(&img, "/d", 1.0, &mut d).unwrap();
         assert_eq!(d.as_slice(), &[1.0, 2.0]);
+    }
+
+    #[test]
+    fn json_stamps_beyond_u64_nanoseconds_are_errors_not_wrapped() {
+        let ct = ChannelType::classify("foxglove.PoseInFrame", "json").unwrap();
+        let text = br#"{"timestamp":{"sec":18446744073709551615,"nsec":0},"frame_id":"w",
+            "pose":{"position":{"x":0,"y":0,"z":0},"orientation":{"x":0,"y":0,"z":0,"w":1}}}"#;
+        let err = decode_poses(ct, "/p", text).unwrap_err().to_string();
+        assert!(
+            err.contains("18446744073709551615") && err.contains("/p"),
+            "{err}"
+        );
     }
 
     #[test]
