@@ -10,6 +10,7 @@
 //! - [`detect`]: choosing colour, depth, calibration and pose topics by schema;
 //! - [`ros2`], [`json`]: the serde layouts of ROS 2 (CDR) and Foxglove JSON messages.
 
+mod cdr_read;
 pub mod decode;
 pub mod detect;
 pub mod json;
