@@ -137,6 +137,14 @@ pub struct FrameStatsMsg {
     pub dvo_iterations: u32,
     /// Final cost.
     pub dvo_cost: f64,
+    /// The motion fallback used: `none`, `constant_velocity` or `hold`.
+    pub pose_fallback: String,
+    /// Frames in a row (this one included) whose motion was a fallback.
+    pub consecutive_failures: u32,
+    /// The detector's accumulation was discarded at this frame.
+    pub detector_reset: bool,
+    /// Fraction of pixels with valid depth.
+    pub valid_depth_fraction: f64,
     /// Fraction of pixels marked moving.
     pub moving_fraction: f64,
     /// Pixels marked moving.
