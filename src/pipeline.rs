@@ -47,8 +47,8 @@
 //! through 4 black colour frames) and across a blackout that DVO bridges (F1 0.99 on the first
 //! frame after a 4- or 10-frame blackout, against 0.17 rising to 0.89 over 8 frames after a
 //! reset). It is **reset** (the frame starts a new accumulation; its mask is empty;
-//! `detector_reset` in the stats) after a rejected motion (a jump: keeping A would flag the
-//! whole new view), when the fallback reaches `Hold`, and when DVO cannot bridge a blackout.
+//! `detector_reset` in the stats) after a rejected motion or DVO's `PoorFit` failure (a jump:
+//! keeping A would flag the whole new view), when the fallback reaches `Hold`, and when DVO cannot bridge a blackout.
 //! [`FailurePolicy::reset_detector_after_gap`] also resets it after every blackout.
 //! With [`PoseSource::External`] only the no-depth rule applies.
 //!
@@ -751,9 +751,13 @@ impl Processor {
                             world_from_camera = previous_output_pose * fallback_motion.inverse();
                             // A failed DVO (no texture, too few pixels) leaves the geometry
                             // intact: the detector goes on with the fallback motion. A
-                            // rejected estimate (a jump), a failure after a blackout, or a
-                            // failure run long enough to hold the pose discards it.
-                            let rejected = matches!(stats.outcome, PoseOutcome::Rejected(_));
+                            // rejected estimate or a poor fit (the views do not match: a
+                            // jump), a failure after a blackout, or a failure run long
+                            // enough to hold the pose discards it.
+                            let rejected = matches!(
+                                stats.outcome,
+                                PoseOutcome::Rejected(_) | PoseOutcome::DvoFailed(DvoFailure::PoorFit { .. })
+                            );
                             keep_detector =
                                 !rejected && !detector_after_gap && fallback != PoseFallback::Hold;
                         }
