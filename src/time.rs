@@ -69,9 +69,17 @@ pub fn split_ns(timestamp_ns: u64) -> (u32, u32) {
     (secs, (timestamp_ns % NANOS_PER_SECOND) as u32)
 }
 
-/// Joins (seconds, nanoseconds) into nanoseconds.
+/// Joins (seconds, nanoseconds) into nanoseconds. `seconds` must be below about 1.8e10
+/// (always true for `u32` seconds); use [`checked_join_ns`] for untrusted 64-bit seconds.
 pub fn join_ns(seconds: u64, nanos: u32) -> u64 {
     seconds * NANOS_PER_SECOND + u64::from(nanos)
+}
+
+/// [`join_ns`], or `None` when the result does not fit in `u64` nanoseconds.
+pub fn checked_join_ns(seconds: u64, nanos: u32) -> Option<u64> {
+    seconds
+        .checked_mul(NANOS_PER_SECOND)
+        .and_then(|s| s.checked_add(u64::from(nanos)))
 }
 
 #[cfg(test)]

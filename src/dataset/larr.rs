@@ -15,8 +15,8 @@ use crate::error::{Error, Result};
 use crate::time::parse_seconds_to_ns;
 
 use super::{
-    check_increasing, content_lines, folder_name, read_groundtruth, require_dir, DatasetKind, FramePair,
-    ImageRef, MaskRef, Sequence,
+    check_increasing, content_lines, folder_name, read_groundtruth, read_text, require_dir, DatasetKind,
+    FramePair, ImageRef, MaskRef, Sequence,
 };
 
 /// Normalised directory names: lower case without spaces, `_`, `-` or a `.dir` suffix.
@@ -107,6 +107,22 @@ fn required_dir(root: &Path, wanted: &str, what: &str) -> Result<PathBuf> {
 /// Parses `association.txt`: `rgb_time rgb_path depth_time depth_path` per line (TUM
 /// `associate.py` output). Paths may be relative to `root` or bare file names.
 fn read_association(path: &Path, color: &[ImageRef], depth: &[ImageRef]) -> Result<Vec<FramePair>> {
+    parse_association(&read_text(path)?, path, color, depth)
+}
+
+/// Parses the text of a LARR `association.txt` (`rgb_time rgb_path depth_time depth_path` per
+/// line) against the listed `color` and `depth` images; `source` is the path named in errors.
+/// Pairs come back as indices into `color` and `depth`, in file order.
+///
+/// # Errors
+/// [`Error::Parse`] with the line for malformed lines, times matching no listed image, or
+/// colour times that do not increase strictly.
+pub fn parse_association(
+    text: &str,
+    source: &Path,
+    color: &[ImageRef],
+    depth: &[ImageRef],
+) -> Result<Vec<FramePair>> {
     let index = |refs: &[ImageRef]| -> HashMap<u64, usize> {
         refs.iter()
             .enumerate()
@@ -116,9 +132,9 @@ fn read_association(path: &Path, color: &[ImageRef], depth: &[ImageRef]) -> Resu
     let (color_at, depth_at) = (index(color), index(depth));
     let mut pairs = Vec::new();
     let mut line_numbers = Vec::new();
-    for (line, text) in content_lines(path)? {
+    for (line, text) in content_lines(text) {
         let err = |message: String| Error::Parse {
-            path: path.to_owned(),
+            path: source.to_owned(),
             line,
             message,
         };
@@ -141,7 +157,7 @@ fn read_association(path: &Path, color: &[ImageRef], depth: &[ImageRef]) -> Resu
         line_numbers.push(line);
     }
     check_increasing(
-        path,
+        source,
         pairs
             .iter()
             .map(|p| color[p.color].timestamp_ns)

@@ -234,37 +234,52 @@ fn check_increasing(path: &Path, items: impl Iterator<Item = (u64, usize)>, what
     Ok(())
 }
 
-/// Lines of a text file without comments (`#`) and blank lines, with 1-based line numbers.
-fn content_lines(path: &Path) -> Result<Vec<(usize, String)>> {
+/// Reads a text file as UTF-8.
+fn read_text(path: &Path) -> Result<String> {
     let text = std::fs::read(path).map_err(|e| Error::io("cannot read", path, e))?;
-    let text = String::from_utf8(text).map_err(|e| Error::Parse {
+    String::from_utf8(text).map_err(|e| Error::Parse {
         path: path.to_owned(),
         line: 1 + e.as_bytes()[..e.utf8_error().valid_up_to()]
             .iter()
             .filter(|&&b| b == b'\n')
             .count(),
         message: "expected UTF-8 text, found invalid bytes".into(),
-    })?;
-    Ok(text
-        .lines()
+    })
+}
+
+/// Lines of a text without comments (`#`) and blank lines, trimmed, with 1-based line numbers.
+fn content_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
         .enumerate()
-        .map(|(i, l)| (i + 1, l.trim().to_owned()))
+        .map(|(i, l)| (i + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
-        .collect())
 }
 
 /// Reads a TUM image list (`timestamp path` per line, `#` comments); paths are relative to
 /// `root`. Every listed file must exist; stamps must increase strictly.
 ///
 /// # Errors
-/// [`Error::Parse`] with the line for malformed lines, bad stamps, missing files or order.
+/// [`Error::Io`] when the file cannot be read; [`Error::Parse`] with the line for invalid
+/// UTF-8, malformed lines, bad stamps, missing files or order.
 pub fn read_image_list(path: &Path, root: &Path) -> Result<Vec<ImageRef>> {
-    let lines = content_lines(path)?;
-    let mut out = Vec::with_capacity(lines.len());
-    let mut line_numbers = Vec::with_capacity(lines.len());
-    for (line, text) in lines {
+    image_list(&read_text(path)?, path, root, true)
+}
+
+/// Parses the text of a TUM image list (see [`read_image_list`]) without touching the file
+/// system: listed files need not exist. `source` is the path named in errors.
+///
+/// # Errors
+/// [`Error::Parse`] with the line for malformed lines, bad stamps or order.
+pub fn parse_image_list(text: &str, source: &Path, root: &Path) -> Result<Vec<ImageRef>> {
+    image_list(text, source, root, false)
+}
+
+fn image_list(text: &str, source: &Path, root: &Path, require_files: bool) -> Result<Vec<ImageRef>> {
+    let mut out = Vec::new();
+    let mut line_numbers = Vec::new();
+    for (line, text) in content_lines(text) {
         let parse_err = |message: String| Error::Parse {
-            path: path.to_owned(),
+            path: source.to_owned(),
             line,
             message,
         };
@@ -277,9 +292,14 @@ pub fn read_image_list(path: &Path, root: &Path) -> Result<Vec<ImageRef>> {
         }
         let timestamp_ns = crate::time::parse_seconds_to_ns(fields[0]).map_err(parse_err)?;
         let image_path = root.join(fields[1]);
-        if !image_path.is_file() {
+        if require_files && !image_path.is_file() {
+            let found = if image_path.is_dir() {
+                "is a directory, expected an image file"
+            } else {
+                "does not exist"
+            };
             return Err(parse_err(format!(
-                "listed image {} does not exist",
+                "listed image {} {found}",
                 image_path.display()
             )));
         }
@@ -290,7 +310,7 @@ pub fn read_image_list(path: &Path, root: &Path) -> Result<Vec<ImageRef>> {
         line_numbers.push(line);
     }
     check_increasing(
-        path,
+        source,
         out.iter().map(|r| r.timestamp_ns).zip(line_numbers),
         "image",
     )?;
@@ -300,14 +320,23 @@ pub fn read_image_list(path: &Path, root: &Path) -> Result<Vec<ImageRef>> {
 /// Reads a TUM trajectory (`timestamp tx ty tz qx qy qz qw`, `#` comments).
 ///
 /// # Errors
-/// [`Error::Parse`] with the line for malformed lines or non-increasing stamps.
+/// [`Error::Io`] when the file cannot be read; [`Error::Parse`] with the line for invalid
+/// UTF-8, malformed lines or non-increasing stamps.
 pub fn read_groundtruth(path: &Path) -> Result<Vec<StampedPose>> {
-    let lines = content_lines(path)?;
-    let mut poses = Vec::with_capacity(lines.len());
-    let mut line_numbers = Vec::with_capacity(lines.len());
-    for (line, text) in lines {
-        let pose = parse_tum_line(&text).map_err(|message| Error::Parse {
-            path: path.to_owned(),
+    parse_groundtruth(&read_text(path)?, path)
+}
+
+/// Parses the text of a TUM trajectory (see [`read_groundtruth`]); `source` is the path named
+/// in errors.
+///
+/// # Errors
+/// [`Error::Parse`] with the line for malformed lines or non-increasing stamps.
+pub fn parse_groundtruth(text: &str, source: &Path) -> Result<Vec<StampedPose>> {
+    let mut poses = Vec::new();
+    let mut line_numbers = Vec::new();
+    for (line, text) in content_lines(text) {
+        let pose = parse_tum_line(text).map_err(|message| Error::Parse {
+            path: source.to_owned(),
             line,
             message,
         })?;
@@ -315,7 +344,7 @@ pub fn read_groundtruth(path: &Path) -> Result<Vec<StampedPose>> {
         line_numbers.push(line);
     }
     check_increasing(
-        path,
+        source,
         poses.iter().map(|p| p.timestamp_ns).zip(line_numbers),
         "ground-truth",
     )?;

@@ -262,6 +262,12 @@ fn check_raw(image: &RawImage, topic: &str, encodings: &[&str], bytes_per_pixel:
         ));
     }
     let size = ImageSize::new(image.width as usize, image.height as usize);
+    if size.area() == 0 {
+        return Err(decode_error(
+            topic,
+            format!("RawImage is {size}: expected at least one pixel"),
+        ));
+    }
     // u64 arithmetic: u32 width, height and step cannot overflow it, whatever a file claims.
     let row_bytes = u64::from(image.width) * bytes_per_pixel as u64;
     let step = u64::from(image.step);
@@ -397,6 +403,40 @@ pub fn isometry_from_parts(
     ))
 }
 
+/// Largest PNG/JPEG occmask decodes, in pixels (2^25: 8K UHD, 7680×4320, fits). A compressed
+/// image declares its size in a few header bytes, so without this bound a tiny corrupt message
+/// could make the decoder allocate hundreds of megabytes (and the f32 grey image four times as
+/// much).
+pub const MAX_COMPRESSED_IMAGE_PIXELS: u64 = 1 << 25;
+
+/// Decodes PNG or JPEG bytes after checking the size their header declares against
+/// [`MAX_COMPRESSED_IMAGE_PIXELS`]. `what` names the image in errors (e.g. `"png image"`).
+///
+/// # Errors
+/// [`Error::Decode`] naming `topic` for undecodable bytes, an empty image or one larger than
+/// [`MAX_COMPRESSED_IMAGE_PIXELS`].
+pub fn decode_compressed_pixels(
+    data: &[u8],
+    format: ::image::ImageFormat,
+    topic: &str,
+    what: &str,
+) -> Result<::image::DynamicImage> {
+    let reader = || ::image::ImageReader::with_format(std::io::Cursor::new(data), format);
+    let cannot = |e: ::image::ImageError| decode_error(topic, format!("cannot decode {what}: {e}"));
+    let (width, height) = reader().into_dimensions().map_err(cannot)?;
+    let pixels = u64::from(width) * u64::from(height);
+    if pixels == 0 || pixels > MAX_COMPRESSED_IMAGE_PIXELS {
+        return Err(decode_error(
+            topic,
+            format!(
+                "{what} declares {width}x{height} pixels: expected between 1 and \
+                 {MAX_COMPRESSED_IMAGE_PIXELS} pixels"
+            ),
+        ));
+    }
+    reader().decode().map_err(cannot)
+}
+
 /// Decodes a `CompressedImage` (PNG or JPEG) into `rgb8` pixels (grey or RGBA inputs are
 /// converted).
 ///
@@ -415,9 +455,8 @@ pub fn rgb8_from_compressed(image: &CompressedImage, topic: &str) -> Result<Rgb8
         ColorFormat::Png => ::image::ImageFormat::Png,
         ColorFormat::Jpeg => ::image::ImageFormat::Jpeg,
     };
-    let decoded = ::image::load_from_memory_with_format(&image.data, image_format)
-        .map_err(|e| decode_error(topic, format!("cannot decode {} image: {e}", format.as_str())))?
-        .into_rgb8();
+    let what = format!("{} image", format.as_str());
+    let decoded = decode_compressed_pixels(&image.data, image_format, topic, &what)?.into_rgb8();
     let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
     let pixels = decoded
         .into_raw()

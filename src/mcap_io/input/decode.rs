@@ -7,7 +7,8 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
-use crate::time::join_ns;
+use crate::mcap_io::codec::decode_compressed_pixels;
+use crate::time::{checked_join_ns, join_ns};
 
 use super::{json, ros2};
 
@@ -216,8 +217,10 @@ fn from_json<'a, T: serde::Deserialize<'a>>(data: &'a [u8], topic: &str, what: &
 }
 
 fn from_cdr<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str) -> Result<T> {
-    // The `cdr` crate reads the 4-byte encapsulation header (little- or big-endian XCDR1).
-    cdr::deserialize::<T>(data).map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
+    // Reads the 4-byte encapsulation header (little- or big-endian XCDR1), then the fields,
+    // checking declared lengths against the message before allocating (cdr_read.rs).
+    super::cdr_read::from_bytes::<T>(data)
+        .map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
 }
 
 fn proto_ns(stamp: Option<&foxglove::messages::Timestamp>) -> u64 {
@@ -229,7 +232,16 @@ fn json_ns(t: json::Time, topic: &str) -> Result<u64> {
         .ok()
         .filter(|&n| n < 1_000_000_000)
         .ok_or_else(|| decode_error(topic, format!("expected timestamp nsec < 1e9, found {}", t.nsec)))?;
-    Ok(join_ns(t.sec, nsec))
+    // JSON seconds are 64-bit: 2^64 ns is only ~584 years, so a corrupt stamp must not wrap.
+    checked_join_ns(t.sec, nsec).ok_or_else(|| {
+        decode_error(
+            topic,
+            format!(
+                "expected a timestamp below 2^64 ns (about 1.8e10 s), found sec = {}",
+                t.sec
+            ),
+        )
+    })
 }
 
 fn ros_ns(t: ros2::Time, topic: &str) -> Result<u64> {
@@ -532,6 +544,13 @@ fn unsupported(topic: &str, what: &str, found: &str, supported: &str) -> Error {
 /// Checks row step and data length of a raw image; returns its size.
 fn raw_rows(topic: &str, width: u32, height: u32, step: u32, bpp: usize, len: usize) -> Result<ImageSize> {
     let size = ImageSize::new(width as usize, height as usize);
+    if size.area() == 0 {
+        // A 0×N image would pass the length checks with no data and loop over N empty rows.
+        return Err(decode_error(
+            topic,
+            format!("image is {size}: expected at least one pixel"),
+        ));
+    }
     let row_bytes = size.width * bpp;
     let step = step as usize;
     if step < row_bytes {
@@ -548,10 +567,28 @@ fn raw_rows(topic: &str, width: u32, height: u32, step: u32, bpp: usize, len: us
     } else {
         step * (size.height - 1) + row_bytes
     };
-    if len < needed {
+    // The data is `height` rows of `step` bytes; writers that trim the last row's padding are
+    // accepted too. Anything else means width, height, step or encoding disagree with the data
+    // (e.g. 32-bit float depth declared as 16UC1).
+    let full = step * size.height;
+    if len != needed && len != full {
+        let expected = if needed == full {
+            format!("{needed}")
+        } else {
+            format!("{needed} or {full}")
+        };
         return Err(decode_error(
             topic,
-            format!("image {size} with step {step} needs {needed} bytes, found {len}"),
+            format!(
+                "image {size} with step {step} and {bpp} bytes per pixel needs {expected} bytes, found {len} \
+                 (width, height, step or encoding disagree with the data)"
+            ),
+        ));
+    }
+    if size.area() == 0 {
+        return Err(decode_error(
+            topic,
+            format!("expected an image with at least one pixel, found {size}"),
         ));
     }
     Ok(size)
@@ -613,8 +650,7 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
             } else {
                 return Err(unsupported(topic, "colour", format, SUPPORTED_COLOR_ENCODINGS));
             };
-            let decoded = image::load_from_memory_with_format(data, image_format)
-                .map_err(|e| decode_error(topic, format!("cannot decode {format} image: {e}")))?;
+            let decoded = decode_compressed_pixels(data, image_format, topic, &format!("{format} image"))?;
             let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
             resize_for(gray, size);
             if decoded.color().channel_count() <= 2 {
@@ -697,9 +733,8 @@ pub fn depth_from_image_into(
                 return Err(unsupported(topic, "depth", format, SUPPORTED_DEPTH_ENCODINGS));
             }
             let png = data.get(COMPRESSED_DEPTH_HEADER_BYTES..).unwrap_or_default();
-            let decoded = image::load_from_memory_with_format(png, image::ImageFormat::Png)
-                .map_err(|e| decode_error(topic, format!("cannot decode {format} depth PNG: {e}")))?
-                .into_luma16();
+            let what = format!("{format} depth PNG");
+            let decoded = decode_compressed_pixels(png, image::ImageFormat::Png, topic, &what)?.into_luma16();
             let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
             resize_for(depth_m, size);
             for (o, v) in depth_m.as_mut_slice().iter_mut().zip(decoded.as_raw()) {
@@ -813,6 +848,80 @@ mod tests {
     }
 
     #[test]
+    fn zero_sized_raw_images_are_rejected_before_any_row_loop() {
+        // 0 × u32::MAX passed every length check with no data and then looped over 4 billion
+        // empty rows (fuzz/regressions/*/slow-zero-width-4g-rows).
+        let msg = ImageMsg {
+            timestamp_ns: 1,
+            frame_id: "cam".into(),
+            payload: ImagePayload::Raw {
+                width: 0,
+                height: u32::MAX,
+                encoding: "mono8".into(),
+                step: 0,
+                big_endian: false,
+                data: Vec::new(),
+            },
+        };
+        let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        let err = gray_from_image_into(&msg, "/c", &mut g).unwrap_err().to_string();
+        assert!(
+            err.contains("/c") && err.contains("0x4294967295") && err.contains("at least one pixel"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn compressed_images_declaring_huge_sizes_are_rejected_before_decoding() {
+        // A PNG header declaring 20000×20000 made the decoder allocate 400 MB for a 60-byte
+        // message before failing on the missing pixel data.
+        let header = |w: u32, h: u32| {
+            let buf = image::GrayImage::new(1, 1);
+            let mut png = std::io::Cursor::new(Vec::new());
+            buf.write_to(&mut png, image::ImageFormat::Png).unwrap();
+            let mut png = png.into_inner();
+            // IHDR data starts after the signature (8), length (4) and type (4).
+            png[16..20].copy_from_slice(&w.to_be_bytes());
+            png[20..24].copy_from_slice(&h.to_be_bytes());
+            let crc = crc32(&png[12..29]);
+            png[29..33].copy_from_slice(&crc.to_be_bytes());
+            png
+        };
+        let msg = |data| ImageMsg {
+            timestamp_ns: 1,
+            frame_id: "cam".into(),
+            payload: ImagePayload::Compressed {
+                format: "png".into(),
+                data,
+            },
+        };
+        let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        let err = gray_from_image_into(&msg(header(20_000, 20_000)), "/c", &mut g)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("20000x20000") && err.contains("/c"), "{err}");
+        // The same header with the real 1×1 size still decodes.
+        gray_from_image_into(&msg(header(1, 1)), "/c", &mut g).unwrap();
+        assert_eq!(g.size(), ImageSize::new(1, 1));
+    }
+
+    /// CRC-32 (PNG chunk checksum), bitwise.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+
+    #[test]
     fn ros2_image_decodes_from_cdr() {
         let msg = ros2::Image {
             header: ros2::Header {
@@ -838,6 +947,18 @@ mod tests {
         let mut d = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
         depth_from_image_into(&img, "/d", 1.0, &mut d).unwrap();
         assert_eq!(d.as_slice(), &[1.0, 2.0]);
+    }
+
+    #[test]
+    fn json_stamps_beyond_u64_nanoseconds_are_errors_not_wrapped() {
+        let ct = ChannelType::classify("foxglove.PoseInFrame", "json").unwrap();
+        let text = br#"{"timestamp":{"sec":18446744073709551615,"nsec":0},"frame_id":"w",
+            "pose":{"position":{"x":0,"y":0,"z":0},"orientation":{"x":0,"y":0,"z":0,"w":1}}}"#;
+        let err = decode_poses(ct, "/p", text).unwrap_err().to_string();
+        assert!(
+            err.contains("18446744073709551615") && err.contains("/p"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -1,0 +1,290 @@
+//! Fuzz harness: one function per target, each feeding arbitrary bytes through the same
+//! library calls the CLI makes on untrusted input. Errors are the expected outcome for most
+//! inputs; the harness only fails on panics, aborts (huge allocations), hangs and a few
+//! round-trip properties that must hold for every accepted input.
+//!
+//! The first byte of a message target's input selects the message flavour/type (so one corpus
+//! covers all variants); the rest is the message. `tests/fuzz_regressions.rs` in the main crate
+//! includes this file with `#[path]` and replays the committed regressions and corpus through
+//! the very same functions, so the fuzz findings stay tested in a plain `cargo test`.
+
+use std::path::Path;
+
+use occmask::dataset;
+use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
+use occmask::mcap_io::codec::{self, Decoded};
+use occmask::mcap_io::input::decode::{
+    decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
+};
+use occmask::mcap_io::input::detect::{describe_channels, detect_topics, TopicOverrides};
+use occmask::mcap_io::input::{ChannelType, Flavor, McapInput, MessageType};
+use occmask::mcap_io::McapFileReader;
+use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
+use occmask::trajectory::{parse_tum_line, tum_line};
+
+/// Topic named in decode errors.
+const TOPIC: &str = "/fuzz";
+/// Depth scale passed to the depth conversion (TUM's 16-bit millimetre-ish scale).
+const UNITS_PER_METER: f64 = 5000.0;
+/// Messages of a whole file visited per input (keeps each execution short).
+const MAX_MESSAGES_PER_FILE: usize = 64;
+
+/// Splits the selector byte from the message.
+fn split(data: &[u8]) -> Option<(u8, &[u8])> {
+    data.split_first().map(|(s, rest)| (*s, rest))
+}
+
+fn channel(flavor: Flavor, message: MessageType) -> ChannelType {
+    ChannelType { flavor, message }
+}
+
+/// Decodes an image and runs both pixel conversions (what `process` does per frame).
+fn image_and_pixels(ct: ChannelType, data: &[u8]) {
+    let Ok(msg) = decode_image(ct, TOPIC, data) else {
+        return;
+    };
+    let _ = msg.is_depth();
+    let mut gray = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+    if gray_from_image_into(&msg, TOPIC, &mut gray).is_ok() {
+        assert!(
+            gray.as_slice().iter().all(|v| (0.0..=1.0).contains(v)),
+            "gray outside 0..1"
+        );
+    }
+    let mut depth = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
+    if depth_from_image_into(&msg, TOPIC, UNITS_PER_METER, &mut depth).is_ok() {
+        assert!(
+            depth.as_slice().iter().all(|v| v.is_finite() && *v >= 0.0),
+            "depth must be finite and non-negative (0 = invalid)"
+        );
+    }
+}
+
+/// The convert/eval reader's protobuf decoders (`codec::decode` and its conversions).
+fn codec_decode(schema: &str, data: &[u8]) {
+    if let Ok(decoded) = codec::decode(schema, TOPIC, data) {
+        codec_conversions(&decoded);
+    }
+}
+
+/// The conversions convert/eval apply to a decoded protobuf message.
+fn codec_conversions(decoded: &Decoded) {
+    match decoded {
+        Decoded::RawImage(raw) => {
+            let _ = codec::depth_u16_from_raw(raw, TOPIC);
+            let _ = codec::mask_from_raw(raw, TOPIC);
+            let _ = codec::rgb8_from_raw(raw, TOPIC);
+        }
+        Decoded::CompressedImage(c) => {
+            let _ = codec::rgb8_from_compressed(c, TOPIC);
+        }
+        Decoded::CameraCalibration(c) => {
+            let _ = codec::intrinsics_from_calibration(c, TOPIC);
+        }
+        Decoded::PoseInFrame(p) => {
+            let _ = codec::stamped_pose_from(p, TOPIC);
+        }
+        Decoded::FrameTransform(t) => {
+            let _ = codec::isometry_from_parts(t.translation.as_ref(), t.rotation.as_ref(), TOPIC);
+        }
+    }
+}
+
+/// Foxglove protobuf `RawImage` / `CompressedImage` (selector bit 0), decoded by the process
+/// input decoder and the convert/eval codec, then converted to grey and depth.
+pub fn proto_image(data: &[u8]) {
+    let Some((selector, msg)) = split(data) else {
+        return;
+    };
+    let (message, schema) = if selector & 1 == 0 {
+        (MessageType::RawImage, "foxglove.RawImage")
+    } else {
+        (MessageType::CompressedImage, "foxglove.CompressedImage")
+    };
+    image_and_pixels(channel(Flavor::FoxgloveProtobuf, message), msg);
+    codec_decode(schema, msg);
+}
+
+/// Foxglove protobuf `CameraCalibration` through both decoders and the K validation.
+pub fn proto_calibration(data: &[u8]) {
+    let ct = channel(Flavor::FoxgloveProtobuf, MessageType::Calibration);
+    if let Ok(c) = decode_calibration(ct, TOPIC, data) {
+        if let Ok(k) = c.intrinsics(TOPIC) {
+            assert!(k.is_valid(), "accepted intrinsics must be valid: {k:?}");
+        }
+    }
+    codec_decode("foxglove.CameraCalibration", data);
+}
+
+/// Foxglove JSON `RawImage` / `CompressedImage` / `CameraCalibration` (selector % 3).
+pub fn json_messages(data: &[u8]) {
+    let Some((selector, msg)) = split(data) else {
+        return;
+    };
+    match selector % 3 {
+        0 => image_and_pixels(channel(Flavor::FoxgloveJson, MessageType::RawImage), msg),
+        1 => image_and_pixels(channel(Flavor::FoxgloveJson, MessageType::CompressedImage), msg),
+        _ => {
+            let ct = channel(Flavor::FoxgloveJson, MessageType::Calibration);
+            if let Ok(c) = decode_calibration(ct, TOPIC, msg) {
+                let _ = c.intrinsics(TOPIC);
+            }
+        }
+    }
+}
+
+/// ROS 2 CDR `sensor_msgs/msg/Image` / `CompressedImage` (selector bit 0).
+pub fn ros2_image(data: &[u8]) {
+    let Some((selector, msg)) = split(data) else {
+        return;
+    };
+    let message = if selector & 1 == 0 {
+        MessageType::RawImage
+    } else {
+        MessageType::CompressedImage
+    };
+    image_and_pixels(channel(Flavor::Ros2Cdr, message), msg);
+}
+
+/// ROS 2 CDR `sensor_msgs/msg/CameraInfo`.
+pub fn ros2_camera_info(data: &[u8]) {
+    let ct = channel(Flavor::Ros2Cdr, MessageType::Calibration);
+    if let Ok(c) = decode_calibration(ct, TOPIC, data) {
+        let _ = c.intrinsics(TOPIC);
+    }
+}
+
+/// Every pose decoder: 3 flavours × PoseInFrame / FrameTransform / FrameTransforms
+/// (selector % 9), plus the convert/eval codec's PoseInFrame and FrameTransform.
+pub fn poses(data: &[u8]) {
+    let Some((selector, msg)) = split(data) else {
+        return;
+    };
+    let flavor = match selector % 3 {
+        0 => Flavor::FoxgloveProtobuf,
+        1 => Flavor::FoxgloveJson,
+        _ => Flavor::Ros2Cdr,
+    };
+    let message = match (selector / 3) % 3 {
+        0 => MessageType::PoseInFrame,
+        1 => MessageType::FrameTransform,
+        _ => MessageType::FrameTransforms,
+    };
+    if let Ok(samples) = decode_poses(channel(flavor, message), TOPIC, msg) {
+        for s in samples {
+            let iso = s.parent_from_child;
+            assert!(
+                iso.translation.vector.iter().all(|v| v.is_finite())
+                    && iso.rotation.coords.iter().all(|v| v.is_finite()),
+                "accepted poses must be finite"
+            );
+        }
+    }
+    if flavor == Flavor::FoxgloveProtobuf {
+        let schema = if message == MessageType::PoseInFrame {
+            "foxglove.PoseInFrame"
+        } else {
+            "foxglove.FrameTransform"
+        };
+        codec_decode(schema, msg);
+    }
+}
+
+/// The TUM/LARR text parsers (selector % 6): image lists, ground-truth trajectories, `--camera`,
+/// times in seconds, single TUM lines and LARR `association.txt`. Accepted times and poses
+/// must survive a format/parse round trip with the exact same nanoseconds.
+pub fn text_parsers(data: &[u8]) {
+    let Some((selector, bytes)) = split(data) else {
+        return;
+    };
+    let text = String::from_utf8_lossy(bytes);
+    let source = Path::new("fuzz.txt");
+    let root = Path::new("/nonexistent-occmask-fuzz-root");
+    match selector % 6 {
+        0 => {
+            let _ = dataset::parse_image_list(&text, source, root);
+        }
+        1 => {
+            if let Ok(poses) = dataset::parse_groundtruth(&text, source) {
+                for p in &poses {
+                    let back = parse_tum_line(&tum_line(p)).expect("tum_line output must parse");
+                    assert_eq!(back.timestamp_ns, p.timestamp_ns);
+                }
+            }
+        }
+        2 => {
+            if let Ok(k) = dataset::parse_camera(&text) {
+                assert!(k.is_valid());
+            }
+        }
+        3 => {
+            if let Ok(ns) = parse_seconds_to_ns(&text) {
+                let formatted = format_ns_as_seconds(ns, 0);
+                assert_eq!(parse_seconds_to_ns(&formatted), Ok(ns), "{formatted}");
+            }
+        }
+        4 => {
+            if let Ok(p) = parse_tum_line(&text) {
+                let back = parse_tum_line(&tum_line(&p)).expect("tum_line output must parse");
+                assert_eq!(back.timestamp_ns, p.timestamp_ns);
+            }
+        }
+        _ => {
+            // Colour frames at 1.0, 1.1, ... s and depth frames 5 ms later, as a LARR listing.
+            let frames = |offset_ns: u64| -> Vec<dataset::ImageRef> {
+                (0..8u64)
+                    .map(|i| dataset::ImageRef {
+                        timestamp_ns: 1_000_000_000 + i * 100_000_000 + offset_ns,
+                        path: root.join(format!("{i}.png")),
+                    })
+                    .collect()
+            };
+            let _ = dataset::larr::parse_association(&text, source, &frames(0), &frames(5_000_000));
+        }
+    }
+}
+
+/// A whole MCAP file: written to `scratch`, opened by the process input (`McapInput`, indexed or
+/// linear), channels described and detected, the first message of every supported channel
+/// decoded, a bounded number of messages visited; then the convert/eval reader
+/// (`McapFileReader`) over the same bytes.
+pub fn mcap_file(data: &[u8], scratch: &Path) {
+    if std::fs::write(scratch, data).is_err() {
+        return;
+    }
+    if let Ok(input) = McapInput::open(scratch) {
+        let _ = describe_channels(&input);
+        let _ = detect_topics(&input, &TopicOverrides::default());
+        let _ = input.extras();
+        for channel in input.channels().values() {
+            let Some(ct) = channel.channel_type else {
+                continue;
+            };
+            let Ok(Some(first)) = input.first_message(channel.id) else {
+                continue;
+            };
+            if ct.is_image() {
+                image_and_pixels(ct, &first.data);
+            } else if ct.is_pose() {
+                let _ = decode_poses(ct, TOPIC, &first.data);
+            } else if let Ok(c) = decode_calibration(ct, TOPIC, &first.data) {
+                let _ = c.intrinsics(TOPIC);
+            }
+        }
+        let mut visited = 0;
+        let _ = input.for_each_message(None, None, |_| {
+            visited += 1;
+            Ok(visited < MAX_MESSAGES_PER_FILE)
+        });
+    }
+    if let Ok(reader) = McapFileReader::open(scratch) {
+        let _ = reader.channels();
+        let _ = reader.metadata();
+        let _ = reader.attachments();
+        if let Ok(messages) = reader.messages() {
+            for m in messages.take(MAX_MESSAGES_PER_FILE).flatten() {
+                codec_conversions(&m.message);
+            }
+        }
+    }
+}
