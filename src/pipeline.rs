@@ -345,7 +345,7 @@ impl PoseOutcome {
 
     /// A short stable name for logs and `/occmask/stats` (`converged`, `first_frame`,
     /// `external`, `failed_degenerate`, `failed_too_few_pixels`, `failed_non_finite`,
-    /// `rejected_non_finite`, `rejected_too_fast`, `rejected_too_fast_rotation`,
+    /// `failed_poor_fit`, `rejected_non_finite`, `rejected_too_fast`, `rejected_too_fast_rotation`,
     /// `rejected_few_inliers`, `rejected_high_cost`, `no_depth`, `no_texture`).
     pub fn as_str(&self) -> &'static str {
         match self {
@@ -355,6 +355,7 @@ impl PoseOutcome {
             PoseOutcome::DvoFailed(DvoFailure::Degenerate { .. }) => "failed_degenerate",
             PoseOutcome::DvoFailed(DvoFailure::TooFewPixels { .. }) => "failed_too_few_pixels",
             PoseOutcome::DvoFailed(DvoFailure::NonFinite { .. }) => "failed_non_finite",
+            PoseOutcome::DvoFailed(DvoFailure::PoorFit { .. }) => "failed_poor_fit",
             PoseOutcome::Rejected(Implausible::NonFinite) => "rejected_non_finite",
             PoseOutcome::Rejected(Implausible::TooFast { .. }) => "rejected_too_fast",
             PoseOutcome::Rejected(Implausible::TooFastRotation { .. }) => "rejected_too_fast_rotation",
