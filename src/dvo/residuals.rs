@@ -707,6 +707,71 @@ mod tests {
         }
     }
 
+    /// The same agreement on a rendered frame pair (texture, depth edges, invalid depth, the
+    /// moving box masked), with the reference points the estimator selects, at the true motion
+    /// and 2 cm / 1° away from it.
+    #[test]
+    fn parallel_kernel_agrees_with_scalar_reference_on_rendered_frames() {
+        use crate::dvo::{DvoConfig, DvoEstimator};
+        use crate::synthetic::{motion_pair, SequenceConfig};
+        let seq = SequenceConfig {
+            size: ImageSize::new(320, 240),
+            ..SequenceConfig::default()
+        };
+        let truth = se3_exp(&Twist::new(0.02, -0.01, 0.01, 0.01, -0.02, 0.005));
+        let (reference, current) = motion_pair(seq, &truth, true);
+        let config = DvoConfig {
+            levels: 2,
+            finest_level: 0,
+            ..DvoConfig::paper()
+        };
+        let build = |f: &crate::synthetic::SyntheticFrame| {
+            let mut p = ImagePyramid::new(seq.size, f.intrinsics, 2, 0).unwrap();
+            p.build(&f.gray, &f.depth_m).unwrap();
+            p
+        };
+        let (pr, pc) = (build(&reference), build(&current));
+        let mut est = DvoEstimator::new(seq.size, config).unwrap();
+        est.prepare_reference(&pr, Some(&reference.gt_mask)).unwrap();
+        let points = est.reference_points(0);
+        assert!(points.len() > 10_000, "{}", points.len());
+        let target = view(&pc);
+        let off = se3_exp(&Twist::new(0.02, 0.0, 0.0, 0.0, 0.017, 0.0)) * truth;
+        for t in [truth, off, Isometry3::identity()] {
+            let a = accumulate_normal_equations_scalar(points, &target, &t, &COST);
+            let b = accumulate_normal_equations(points, 320, &target, &t, &COST);
+            assert_eq!(a.total, b.total);
+            // f32 and f64 may decide differently for a point exactly on a domain border.
+            let slack = points.len() / 1000;
+            assert!(a.valid.abs_diff(b.valid) <= slack, "{} vs {}", a.valid, b.valid);
+            // Open discrepancy: at identity (the box region seen through the wrong pose) the
+            // inlier counts differ by 57 of 41.8 k points (0.14 %) and the cost by 1e-4
+            // relative, while H and g agree within 1e-3 — most likely points next to depth
+            // edges whose depth term one kernel keeps and the other drops (not yet resolved).
+            assert!(
+                a.inliers.abs_diff(b.inliers) <= 5 * slack,
+                "{} vs {}",
+                a.inliers,
+                b.inliers
+            );
+            let rel = |x: f64, y: f64, scale: f64| (x - y).abs() / scale.max(1e-12);
+            assert!(
+                rel(a.cost, b.cost, a.cost) < 1e-3,
+                "cost {} vs {}",
+                a.cost,
+                b.cost
+            );
+            let hmax = a.hessian_upper.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (x, y) in a.hessian_upper.iter().zip(&b.hessian_upper) {
+                assert!(rel(*x, *y, hmax) < 1e-3, "H {x} vs {y}");
+            }
+            let gmax = a.gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (x, y) in a.gradient.iter().zip(&b.gradient) {
+                assert!(rel(*x, *y, gmax) < 1e-2, "g {x} vs {y}");
+            }
+        }
+    }
+
     #[test]
     fn unusable_points_pay_the_saturated_cost() {
         let pyr = smooth_level();
