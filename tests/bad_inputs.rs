@@ -524,9 +524,13 @@ fn process_bad_input_corpus() {
             let output = out_dir.join("out.mcap");
             let mut args = os(&[&"process", &input, &"-o", &output]);
             args.extend(case.extra.iter().map(OsString::from));
-            check(case.name, &args, &[&input], &out_dir, &[], &case.expect);
+            let out = check(case.name, &args, &[&input], &out_dir, &[], &case.expect);
             if !matches!(case.expect, Expect::Fails(_)) {
                 assert!(output.is_file(), "{}: no output", case.name);
+                if case.name == "truncated inside a chunk" {
+                    let err = stderr(&out);
+                    assert!(err.contains("(input truncated: last "), "summary line: {err}");
+                }
                 // A truncated input leaves its trace in the output's metadata record.
                 let meta = process_metadata(&output);
                 let truncated = case.name.starts_with("truncated");

@@ -567,14 +567,19 @@ fn print_summary(results: &[JobResult], jobs: &[Job]) {
             Ok((rep, secs)) => {
                 let _ = writeln!(
                     out,
-                    "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}",
+                    "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}{}",
                     name,
                     rep.frames,
                     rep.unpaired_color,
                     rep.unpaired_depth,
                     rep.outside_pose_stream,
                     secs,
-                    rep.frames as f64 / secs.max(1e-9)
+                    rep.frames as f64 / secs.max(1e-9),
+                    match &rep.input_truncation {
+                        Some(t) if t.messages_intact => "  (input truncated, no message lost)".to_owned(),
+                        Some(t) => format!("  (input truncated: last {} bytes lost)", t.lost_bytes),
+                        None => String::new(),
+                    }
                 );
             }
             Err(_) => {
