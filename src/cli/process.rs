@@ -512,9 +512,17 @@ fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
                 "no message lost (only the summary/index after the data is missing)".to_owned()
             }
             Some(t) => format!(
-                "the last {} bytes (an incomplete record at byte {}) are lost{}",
+                "the last {} bytes (an incomplete record at byte {}{}) are lost{}",
                 t.lost_bytes,
                 t.intact_bytes,
+                if t.salvaged_messages > 0 {
+                    format!(
+                        ", whose first {} complete messages were read",
+                        t.salvaged_messages
+                    )
+                } else {
+                    String::new()
+                },
                 t.lost_log_time_range
                     .map(|(a, b)| format!(
                         ", with the messages logged from {} to {} s",
