@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use nalgebra::Isometry3;
 
-use crate::dvo::{DvoConfig, DvoStatus};
+use crate::dvo::DvoConfig;
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
@@ -29,7 +29,7 @@ use crate::mcap_io::input::decode::{
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
 use crate::mcap_io::input::{McapInput, RawMessage, Truncation};
 use crate::mcap_io::DEPTH_UNITS_KEY;
-use crate::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
+use crate::pipeline::{FrameInput, PoseFallback, PoseSource, Processor, ProcessorConfig};
 use crate::time::split_ns;
 use crate::trajectory::{interpolate, StampedPose};
 
@@ -77,12 +77,41 @@ pub struct ProcessedFrame {
     pub world_from_camera: Isometry3<f64>,
     /// The accumulation map, if the processor exposes it.
     pub accumulation: Option<Image<f32>>,
-    /// Odometry outcome (`converged`, `max_iterations`, `failed`, `first_frame`, `external`).
+    /// Odometry outcome ([`crate::pipeline::PoseOutcome::as_str`]: `converged`, `first_frame`, `external`,
+    /// `failed_*`, `rejected_*`, `no_depth`).
     pub dvo_status: String,
     /// Gauss–Newton iterations.
     pub dvo_iterations: u32,
     /// Final cost.
     pub dvo_cost: f64,
+    /// How the pipeline handled the frame's failure modes.
+    pub health: FrameHealth,
+}
+
+/// How the pipeline handled a frame's failure modes (see [`crate::pipeline`]): written to
+/// `/occmask/stats`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameHealth {
+    /// The fallback used for the motion.
+    pub pose_fallback: PoseFallback,
+    /// Frames in a row (this one included) whose motion was a fallback.
+    pub consecutive_failures: u32,
+    /// The detector's accumulation was discarded at this frame.
+    pub detector_reset: bool,
+    /// Fraction of pixels with valid depth.
+    pub valid_depth_fraction: f64,
+}
+
+impl Default for FrameHealth {
+    /// A healthy frame with full depth.
+    fn default() -> Self {
+        Self {
+            pose_fallback: PoseFallback::None,
+            consecutive_failures: 0,
+            detector_reset: false,
+            valid_depth_fraction: 1.0,
+        }
+    }
 }
 
 /// The per-sequence algorithm (DVO + detector) behind a small boundary, so reading and
@@ -800,11 +829,15 @@ impl FrameLoop {
             pose_source: ctx.config.pose_mode.as_str().into(),
             dvo_status: result.dvo_status.clone(),
             dvo_iterations: result.dvo_iterations,
-            dvo_cost: result.dvo_cost,
+            dvo_cost: finite_or_zero(result.dvo_cost),
+            pose_fallback: result.health.pose_fallback.as_str().into(),
+            consecutive_failures: result.health.consecutive_failures,
+            detector_reset: result.health.detector_reset,
+            valid_depth_fraction: finite_or_zero(result.health.valid_depth_fraction),
             moving_fraction: moving as f64 / size.area().max(1) as f64,
             moving_pixels: moving,
-            decode_ms,
-            process_ms,
+            decode_ms: finite_or_zero(decode_ms),
+            process_ms: finite_or_zero(process_ms),
         };
         writer.write_frame(&FrameAnnotation {
             log_time_ns: color.log_time_ns,
@@ -865,13 +898,6 @@ impl PipelineProcessor {
     }
 }
 
-fn dvo_status_name(status: &DvoStatus) -> String {
-    match status {
-        DvoStatus::Converged => "converged".into(),
-        DvoStatus::Failed(reason) => format!("failed: {reason:?}"),
-    }
-}
-
 impl FrameProcessor for PipelineProcessor {
     fn process(&mut self, frame: &RgbdFrame<'_>) -> Result<ProcessedFrame> {
         let out = self.processor.process(&FrameInput {
@@ -880,23 +906,37 @@ impl FrameProcessor for PipelineProcessor {
             depth_m: frame.depth_m,
             world_from_marker: frame.world_from_camera.as_ref(),
         })?;
-        let (dvo_status, dvo_iterations, dvo_cost) = match (&out.stats.dvo, self.mode) {
-            (_, PoseMode::External) => ("external".to_owned(), 0, 0.0),
-            (Some(d), _) => (
-                dvo_status_name(&d.status),
-                d.iterations_per_level.iter().sum(),
-                d.final_cost,
-            ),
-            (None, _) => ("first_frame".to_owned(), 0, 0.0),
+        let stats = &out.stats;
+        let (dvo_iterations, dvo_cost) = match (&stats.dvo, self.mode) {
+            (Some(d), PoseMode::Dvo | PoseMode::DvoUnmasked) => {
+                (d.iterations_per_level.iter().sum(), d.final_cost)
+            }
+            _ => (0, 0.0),
         };
         Ok(ProcessedFrame {
             mask: out.mask.clone(),
             world_from_camera: out.world_from_camera,
             accumulation: self.keep_accumulation.then(|| out.accumulation_m.clone()),
-            dvo_status,
+            dvo_status: stats.outcome.as_str().to_owned(),
             dvo_iterations,
             dvo_cost,
+            health: FrameHealth {
+                pose_fallback: stats.pose_fallback,
+                consecutive_failures: stats.consecutive_failures,
+                detector_reset: stats.detector_reset,
+                valid_depth_fraction: stats.valid_depth_fraction,
+            },
         })
+    }
+}
+
+/// `value`, or 0 when it is NaN or infinite (JSON has no NaN: serde_json would write `null`,
+/// which the schema's `number` fields reject).
+fn finite_or_zero(value: f64) -> f64 {
+    if value.is_finite() {
+        value
+    } else {
+        0.0
     }
 }
 

@@ -25,8 +25,8 @@ use std::sync::Arc;
 use mcap::records::{MessageHeader, Record};
 use mcap::sans_io::indexed_reader::ReadOrder;
 use mcap::sans_io::{
-    IndexedReadEvent, IndexedReader, IndexedReaderOptions, LinearReadEvent, LinearReader, SummaryReadEvent,
-    SummaryReader,
+    IndexedReadEvent, IndexedReader, IndexedReaderOptions, LinearReadEvent, LinearReader,
+    LinearReaderOptions, SummaryReadEvent, SummaryReader, SummaryReaderOptions,
 };
 
 use crate::error::{Error, Result};
@@ -261,6 +261,19 @@ fn find_truncation(path: &Path, file_len: u64) -> Result<Truncation> {
 /// Buffer size of the linear reader's file reads.
 const READ_BUFFER_BYTES: usize = 1 << 20;
 
+/// Smallest limit on one record or decompressed chunk, whatever the file size. Recorders write
+/// chunks of a few MiB (ours 4 MiB) and the largest single RGB-D message is a raw 4K frame of
+/// ~25 MB; a compressed chunk may decompress to more than the whole file, so the limit is not
+/// just the file length.
+const MIN_RECORD_LENGTH_LIMIT_BYTES: u64 = 256 << 20;
+
+/// The longest record (or decompressed chunk) the MCAP readers accept in a file of `file_len`
+/// bytes. Without a limit the mcap readers allocate whatever length a corrupt record declares
+/// (found by fuzzing: 8e18 bytes from a 2.5 kB file, README "Fuzzing").
+fn record_length_limit(file_len: u64) -> usize {
+    usize::try_from(file_len.max(MIN_RECORD_LENGTH_LIMIT_BYTES)).unwrap_or(usize::MAX)
+}
+
 /// An open input MCAP file.
 pub struct McapInput {
     path: PathBuf,
@@ -293,7 +306,15 @@ fn open_file(path: &Path) -> Result<File> {
 
 /// Reads the summary with the sans-IO summary reader (seeks to the footer; bounded memory).
 fn read_summary(file: &mut File, path: &Path) -> Result<Option<mcap::Summary>> {
-    let mut reader = SummaryReader::new();
+    let file_len = file
+        .metadata()
+        .map_err(|e| Error::io("cannot stat MCAP file", path, e))?
+        .len();
+    let mut reader = SummaryReader::new_with_options(
+        SummaryReaderOptions::default()
+            .with_file_size(file_len)
+            .with_record_length_limit(record_length_limit(file_len)),
+    );
     while let Some(event) = reader.next_event() {
         match event? {
             SummaryReadEvent::ReadRequest(n) => {
@@ -357,8 +378,15 @@ fn read_profile(file: &mut File, path: &Path) -> Result<String> {
 /// early (a recorder killed mid-write) is read up to its last complete record and reported
 /// with `Ok(true)` ("truncated"); other errors are errors.
 fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> Result<bool> {
-    let mut file = BufReader::with_capacity(READ_BUFFER_BYTES, open_file(path)?);
-    let mut reader = LinearReader::new();
+    let file = open_file(path)?;
+    let file_len = file
+        .metadata()
+        .map_err(|e| Error::io("cannot stat MCAP file", path, e))?
+        .len();
+    let mut file = BufReader::with_capacity(READ_BUFFER_BYTES, file);
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default().with_record_length_limit(record_length_limit(file_len)),
+    );
     while let Some(event) = reader.next_event() {
         let event = match event {
             Ok(e) => e,
@@ -677,7 +705,9 @@ impl McapInput {
             })?;
             return Ok(());
         };
-        let mut options = IndexedReaderOptions::new().with_order(ReadOrder::LogTime);
+        let mut options = IndexedReaderOptions::new()
+            .with_order(ReadOrder::LogTime)
+            .with_record_length_limit(record_length_limit(self.file_len));
         if let Some(topics) = topics {
             options = options.include_topics(topics.iter().cloned());
         }
