@@ -341,6 +341,10 @@ pub fn truncation_metadata(t: &Truncation) -> Vec<(String, String)> {
         ("input_intact_bytes".to_owned(), t.intact_bytes.to_string()),
         ("input_lost_bytes".to_owned(), t.lost_bytes.to_string()),
         ("input_messages_lost".to_owned(), (!t.messages_intact).to_string()),
+        (
+            "input_salvaged_messages".to_owned(),
+            t.salvaged_messages.to_string(),
+        ),
     ];
     if let Some((a, b)) = t.lost_log_time_range {
         v.push((

@@ -512,9 +512,17 @@ fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
                 "no message lost (only the summary/index after the data is missing)".to_owned()
             }
             Some(t) => format!(
-                "the last {} bytes (an incomplete record at byte {}) are lost{}",
+                "the last {} bytes (an incomplete record at byte {}{}) are lost{}",
                 t.lost_bytes,
                 t.intact_bytes,
+                if t.salvaged_messages > 0 {
+                    format!(
+                        ", whose first {} complete messages were read",
+                        t.salvaged_messages
+                    )
+                } else {
+                    String::new()
+                },
                 t.lost_log_time_range
                     .map(|(a, b)| format!(
                         ", with the messages logged from {} to {} s",
@@ -567,14 +575,19 @@ fn print_summary(results: &[JobResult], jobs: &[Job]) {
             Ok((rep, secs)) => {
                 let _ = writeln!(
                     out,
-                    "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}",
+                    "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}{}",
                     name,
                     rep.frames,
                     rep.unpaired_color,
                     rep.unpaired_depth,
                     rep.outside_pose_stream,
                     secs,
-                    rep.frames as f64 / secs.max(1e-9)
+                    rep.frames as f64 / secs.max(1e-9),
+                    match &rep.input_truncation {
+                        Some(t) if t.messages_intact => "  (input truncated, no message lost)".to_owned(),
+                        Some(t) => format!("  (input truncated: last {} bytes lost)", t.lost_bytes),
+                        None => String::new(),
+                    }
                 );
             }
             Err(_) => {

@@ -183,4 +183,14 @@ mod tests {
             .to_string();
         assert!(err.contains("directory"), "{err}");
     }
+
+    #[cfg(unix)]
+    #[test]
+    fn refuses_to_replace_a_device() {
+        let err = AtomicOutput::create(Path::new("/dev/null"), true, &[])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("a regular file path"), "{err}");
+        assert!(std::fs::metadata("/dev/null").is_ok_and(|m| !m.is_file()));
+    }
 }

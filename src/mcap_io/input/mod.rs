@@ -108,9 +108,90 @@ pub struct Truncation {
     /// True when the cut lies after the data section (only the summary, index or footer is
     /// missing), so no message was lost.
     pub messages_intact: bool,
-    /// Log-time range (ns) of the messages in the incomplete chunk, when its header survived:
-    /// the messages lost.
+    /// Log-time range (ns) of the messages lost in the incomplete chunk, when its header
+    /// survived: from the last message salvaged from it (or its start) to its end.
     pub lost_log_time_range: Option<(u64, u64)>,
+    /// Complete messages at the start of the incomplete chunk (the linear reader decompresses
+    /// chunks as a stream, so these were read too).
+    pub salvaged_messages: u64,
+}
+
+/// The complete records at the start of an incomplete trailing chunk at `offset` (a recorder
+/// killed while writing it): the compressed prefix is decompressed as far as it goes (zstd and
+/// lz4 decode block by block) and parsed up to the first incomplete record. Returns
+/// (opcode, body) pairs; empty when the record at `offset` is not a chunk.
+fn partial_chunk_records(path: &Path, offset: u64) -> Result<Vec<(u8, Vec<u8>)>> {
+    // Chunk header after opcode and length: start, end, uncompressed size (u64 each), CRC (u32),
+    // compression string (u32 length + bytes), compressed size (u64).
+    const FIXED_BYTES: usize = 9 + 8 + 8 + 8 + 4;
+    let mut file = open_file(path)?;
+    let mut buf = Vec::new();
+    file.seek(SeekFrom::Start(offset))
+        .and_then(|_| file.read_to_end(&mut buf))
+        .map_err(|e| Error::io("cannot read MCAP file", path, e))?;
+    if buf.len() < FIXED_BYTES + 4 || buf[0] != mcap::records::op::CHUNK {
+        return Ok(Vec::new());
+    }
+    let u64_at = |i: usize| {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&buf[i..i + 8]);
+        u64::from_le_bytes(b)
+    };
+    let uncompressed_size = u64_at(9 + 16);
+    let mut len = [0u8; 4];
+    len.copy_from_slice(&buf[FIXED_BYTES..FIXED_BYTES + 4]);
+    let name_end = FIXED_BYTES + 4 + u32::from_le_bytes(len) as usize;
+    let data_start = name_end + 8;
+    if data_start > buf.len() {
+        return Ok(Vec::new());
+    }
+    let compression = String::from_utf8_lossy(&buf[FIXED_BYTES + 4..name_end]).into_owned();
+    let data = &buf[data_start..];
+    let mut out = Vec::new();
+    let read_partial = |mut r: Box<dyn Read + '_>, out: &mut Vec<u8>| {
+        let mut block = vec![0u8; 64 * 1024];
+        while out.len() < uncompressed_size as usize {
+            match r.read(&mut block) {
+                Ok(0) | Err(_) => break,
+                Ok(n) => out.extend_from_slice(&block[..n]),
+            }
+        }
+    };
+    match compression.as_str() {
+        "" => out.extend_from_slice(data),
+        "zstd" => {
+            if let Ok(d) = zstd::stream::read::Decoder::with_buffer(data) {
+                read_partial(Box::new(d), &mut out);
+            }
+        }
+        "lz4" => {
+            if let Ok(d) = lz4::Decoder::new(data) {
+                read_partial(Box::new(d), &mut out);
+            }
+        }
+        _ => return Ok(Vec::new()),
+    }
+    out.truncate(uncompressed_size as usize);
+    let mut records = Vec::new();
+    let mut pos = 0usize;
+    while pos + 9 <= out.len() {
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&out[pos + 1..pos + 9]);
+        let Ok(len) = usize::try_from(u64::from_le_bytes(len)) else {
+            break;
+        };
+        let Some(end) = (pos + 9).checked_add(len).filter(|&e| e <= out.len()) else {
+            break;
+        };
+        let opcode = out[pos];
+        // Only records that parse are kept (the decompressed tail may be garbage).
+        if mcap::parse_record(opcode, &out[pos + 9..end]).is_err() {
+            break;
+        }
+        records.push((opcode, out[pos + 9..end].to_vec()));
+        pos = end;
+    }
+    Ok(records)
 }
 
 /// Walks the top-level record framing (opcode, length, body) without reading bodies, and
@@ -139,11 +220,18 @@ fn find_truncation(path: &Path, file_len: u64) -> Result<Truncation> {
         let end = pos.saturating_add(PREFIX_BYTES).saturating_add(len);
         if end > file_len {
             let mut lost_log_time_range = None;
+            let mut salvaged_messages = 0;
             if opcode == mcap::records::op::CHUNK && len >= CHUNK_TIMES_BYTES as u64 {
                 let mut times = [0u8; CHUNK_TIMES_BYTES];
                 if file.read_exact(&mut times).is_ok() {
-                    let start = u64::from_le_bytes(times[..8].try_into().unwrap_or([0; 8]));
+                    let mut start = u64::from_le_bytes(times[..8].try_into().unwrap_or([0; 8]));
                     let end = u64::from_le_bytes(times[8..].try_into().unwrap_or([0; 8]));
+                    for (op, body) in partial_chunk_records(path, pos)? {
+                        if let Ok(Record::Message { header, .. }) = mcap::parse_record(op, &body) {
+                            salvaged_messages += 1;
+                            start = start.max(header.log_time);
+                        }
+                    }
                     lost_log_time_range = Some((start, end));
                 }
             }
@@ -152,6 +240,7 @@ fn find_truncation(path: &Path, file_len: u64) -> Result<Truncation> {
                 lost_bytes: file_len - pos,
                 messages_intact,
                 lost_log_time_range,
+                salvaged_messages,
             });
         }
         if opcode == mcap::records::op::DATA_END {
@@ -165,6 +254,7 @@ fn find_truncation(path: &Path, file_len: u64) -> Result<Truncation> {
         lost_bytes: file_len - pos,
         messages_intact,
         lost_log_time_range: None,
+        salvaged_messages: 0,
     })
 }
 
@@ -300,6 +390,8 @@ fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> R
     while let Some(event) = reader.next_event() {
         let event = match event {
             Ok(e) => e,
+            // The linear reader decompresses chunks as a stream, so the complete messages at
+            // the start of an incomplete last chunk have already been passed to `f`.
             Err(mcap::McapError::UnexpectedEof) => return Ok(true),
             Err(e) => return Err(e.into()),
         };
