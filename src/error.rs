@@ -48,15 +48,16 @@ pub enum Error {
     },
 
     /// A file or directory could not be read or written.
-    #[error("{action}: {source} ({})", path.display())]
+    // The OS error is part of the message and deliberately not a `source()`, so anyhow's
+    // `{:#}` chain does not print it twice.
+    #[error("{action}: {os_error} ({})", path.display())]
     Io {
         /// What was being done ("cannot open", "cannot write").
         action: String,
         /// The file.
         path: PathBuf,
         /// The operating system's error.
-        #[source]
-        source: std::io::Error,
+        os_error: std::io::Error,
     },
 
     /// An image file could not be decoded or has the wrong pixel format.
@@ -117,7 +118,7 @@ impl Error {
         Error::Io {
             action: action.into(),
             path: path.into(),
-            source,
+            os_error: source,
         }
     }
 }

@@ -20,7 +20,7 @@ use crate::error::{Error, Result};
 use crate::image_buf::{ImageSize, Mask, MASK_SET};
 use crate::mcap_io::annotate::{TOPIC_MASK, TOPIC_ODOMETRY};
 use crate::mcap_io::input::decode::{decode_image, decode_poses, ImagePayload};
-use crate::mcap_io::input::McapInput;
+use crate::mcap_io::input::{McapInput, Truncation};
 use crate::mcap_io::{TOPIC_GROUNDTRUTH_MASK, TOPIC_GROUNDTRUTH_POSE};
 use crate::metrics::segmentation::{SegmentationSummary, SegmentationTally};
 use crate::metrics::trajectory::{ate, rpe_stamped, AteStats, RpeStats};
@@ -99,6 +99,8 @@ pub struct EvalReport {
     pub segmentation: Option<SegmentationReport>,
     /// Odometry, when `/groundtruth/pose` is present.
     pub odometry: Option<OdometryReport>,
+    /// Set when the file ends early: the scores cover its complete records only.
+    pub truncation: Option<Truncation>,
 }
 
 fn mask_from_message(input: &McapInput, channel_id: u16, data: &[u8]) -> Result<(u64, Mask)> {
@@ -298,6 +300,7 @@ pub fn evaluate(path: &Path) -> Result<EvalReport> {
         estimated_masks,
         segmentation,
         odometry,
+        truncation: input.truncation().copied(),
     })
 }
 

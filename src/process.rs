@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use nalgebra::Isometry3;
 
-use crate::dvo::{DvoConfig, DvoStatus};
+use crate::dvo::DvoConfig;
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
@@ -27,9 +27,9 @@ use crate::mcap_io::input::decode::{
     decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
 };
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
-use crate::mcap_io::input::{McapInput, RawMessage};
+use crate::mcap_io::input::{McapInput, RawMessage, Truncation};
 use crate::mcap_io::DEPTH_UNITS_KEY;
-use crate::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
+use crate::pipeline::{FrameInput, PoseFallback, PoseSource, Processor, ProcessorConfig};
 use crate::time::split_ns;
 use crate::trajectory::{interpolate, StampedPose};
 
@@ -77,12 +77,41 @@ pub struct ProcessedFrame {
     pub world_from_camera: Isometry3<f64>,
     /// The accumulation map, if the processor exposes it.
     pub accumulation: Option<Image<f32>>,
-    /// Odometry outcome (`converged`, `max_iterations`, `failed`, `first_frame`, `external`).
+    /// Odometry outcome ([`crate::pipeline::PoseOutcome::as_str`]: `converged`, `first_frame`, `external`,
+    /// `failed_*`, `rejected_*`, `no_depth`).
     pub dvo_status: String,
     /// Gauss–Newton iterations.
     pub dvo_iterations: u32,
     /// Final cost.
     pub dvo_cost: f64,
+    /// How the pipeline handled the frame's failure modes.
+    pub health: FrameHealth,
+}
+
+/// How the pipeline handled a frame's failure modes (see [`crate::pipeline`]): written to
+/// `/occmask/stats`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameHealth {
+    /// The fallback used for the motion.
+    pub pose_fallback: PoseFallback,
+    /// Frames in a row (this one included) whose motion was a fallback.
+    pub consecutive_failures: u32,
+    /// The detector's accumulation was discarded at this frame.
+    pub detector_reset: bool,
+    /// Fraction of pixels with valid depth.
+    pub valid_depth_fraction: f64,
+}
+
+impl Default for FrameHealth {
+    /// A healthy frame with full depth.
+    fn default() -> Self {
+        Self {
+            pose_fallback: PoseFallback::None,
+            consecutive_failures: 0,
+            detector_reset: false,
+            valid_depth_fraction: 1.0,
+        }
+    }
 }
 
 /// The per-sequence algorithm (DVO + detector) behind a small boundary, so reading and
@@ -188,6 +217,12 @@ pub struct ProcessReport {
     pub new_messages: u64,
     /// The input ended early (unfinished recording); everything readable was used.
     pub input_truncated: bool,
+    /// Where a truncated input was cut and what was lost.
+    pub input_truncation: Option<Truncation>,
+    /// Colour/depth pairs whose stamp is not after the previous processed frame's (stamps
+    /// going backwards or duplicated): skipped, since odometry and the detector need time
+    /// order.
+    pub out_of_order_frames: u64,
     /// The estimated trajectory (colour stamps).
     pub trajectory: Vec<StampedPose>,
 }
@@ -295,6 +330,44 @@ impl Pairer {
 
     fn oldest_color_log_time(&self) -> Option<u64> {
         self.color.iter().map(|q| q.log_time_ns).min()
+    }
+}
+
+/// Metadata keys describing a truncated input (`input_truncated`, `input_intact_bytes`,
+/// `input_lost_bytes`, `input_messages_lost`, and `input_lost_log_time` when known).
+pub fn truncation_metadata(t: &Truncation) -> Vec<(String, String)> {
+    let mut v = vec![
+        ("input_truncated".to_owned(), "true".to_owned()),
+        ("input_intact_bytes".to_owned(), t.intact_bytes.to_string()),
+        ("input_lost_bytes".to_owned(), t.lost_bytes.to_string()),
+        ("input_messages_lost".to_owned(), (!t.messages_intact).to_string()),
+    ];
+    if let Some((a, b)) = t.lost_log_time_range {
+        v.push((
+            "input_lost_log_time".to_owned(),
+            format!(
+                "{}..{}",
+                crate::time::format_ns_as_seconds(a, 6),
+                crate::time::format_ns_as_seconds(b, 6)
+            ),
+        ));
+    }
+    v
+}
+
+/// Adds which message failed (log time and sequence number, as a player shows them) to a
+/// decode error, so the user can find the frame.
+fn at_message(error: Error, header: &mcap::records::MessageHeader) -> Error {
+    match error {
+        Error::Decode { topic, message } => Error::Decode {
+            topic,
+            message: format!(
+                "message at log time {} s (sequence {}): {message}",
+                crate::time::format_ns_as_seconds(header.log_time, 6),
+                header.sequence
+            ),
+        },
+        other => other,
     }
 }
 
@@ -428,7 +501,7 @@ pub fn process_file<W: Write + Seek>(
     };
 
     let mut writer = AnnotatedWriter::new(sink, input, &config.annotate)?;
-    let metadata = BTreeMap::from([
+    let mut metadata = BTreeMap::from([
         ("tool".to_owned(), crate::mcap_io::LIBRARY.to_owned()),
         ("pose_source".to_owned(), config.pose_mode.as_str().to_owned()),
         ("color_topic".to_owned(), topics.color.topic.clone()),
@@ -442,6 +515,10 @@ pub fn process_file<W: Write + Seek>(
         ),
         (DEPTH_UNITS_KEY.to_owned(), depth_units_per_meter.to_string()),
     ]);
+    if let Some(t) = input.truncation() {
+        // Recorded only for damaged inputs, so complete inputs keep their exact bytes.
+        metadata.extend(truncation_metadata(t));
+    }
     writer.write_metadata(METADATA_PROCESS, metadata)?;
 
     let color_ct = topics.color.channel_type.ok_or_else(|| Error::Decode {
@@ -485,6 +562,8 @@ pub fn process_file<W: Write + Seek>(
             copied_messages: 0,
             new_messages: 0,
             input_truncated: input.is_truncated(),
+            input_truncation: input.truncation().copied(),
+            out_of_order_frames: 0,
             trajectory: Vec::new(),
         },
     };
@@ -509,16 +588,19 @@ pub fn process_file<W: Write + Seek>(
         } else {
             (depth_ct, &topics.depth.topic)
         };
-        let msg = decode_image(ct, topic, &m.data)?;
-        let pixels = if is_color {
-            let mut gray = GrayF32::filled(ImageSize::new(0, 0), 0.0);
-            gray_from_image_into(&msg, topic, &mut gray)?;
-            Pixels::Gray(gray)
-        } else {
-            let mut depth = DepthMeters::filled(ImageSize::new(0, 0), 0.0);
-            depth_from_image_into(&msg, topic, depth_units_per_meter, &mut depth)?;
-            Pixels::Depth(depth)
-        };
+        let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
+            let pixels = if is_color {
+                let mut gray = GrayF32::filled(ImageSize::new(0, 0), 0.0);
+                gray_from_image_into(&msg, topic, &mut gray)?;
+                Pixels::Gray(gray)
+            } else {
+                let mut depth = DepthMeters::filled(ImageSize::new(0, 0), 0.0);
+                depth_from_image_into(&msg, topic, depth_units_per_meter, &mut depth)?;
+                Pixels::Depth(depth)
+            };
+            Ok((msg, pixels))
+        });
+        let (msg, pixels) = decoded.map_err(|e| at_message(e, &m.header))?;
         Ok(Some((
             is_color,
             Queued {
@@ -651,6 +733,15 @@ impl FrameLoop {
             self.report.outside_time_range += 1;
             return Ok(());
         }
+        if self
+            .report
+            .trajectory
+            .last()
+            .is_some_and(|p| stamp <= p.timestamp_ns)
+        {
+            self.report.out_of_order_frames += 1;
+            return Ok(());
+        }
         let external = if ctx.config.pose_mode == PoseMode::External {
             match interpolate(ctx.external_poses, stamp, ctx.config.max_pose_gap_ns) {
                 Some(p) => Some(p),
@@ -734,11 +825,15 @@ impl FrameLoop {
             pose_source: ctx.config.pose_mode.as_str().into(),
             dvo_status: result.dvo_status.clone(),
             dvo_iterations: result.dvo_iterations,
-            dvo_cost: result.dvo_cost,
+            dvo_cost: finite_or_zero(result.dvo_cost),
+            pose_fallback: result.health.pose_fallback.as_str().into(),
+            consecutive_failures: result.health.consecutive_failures,
+            detector_reset: result.health.detector_reset,
+            valid_depth_fraction: finite_or_zero(result.health.valid_depth_fraction),
             moving_fraction: moving as f64 / size.area().max(1) as f64,
             moving_pixels: moving,
-            decode_ms,
-            process_ms,
+            decode_ms: finite_or_zero(decode_ms),
+            process_ms: finite_or_zero(process_ms),
         };
         writer.write_frame(&FrameAnnotation {
             log_time_ns: color.log_time_ns,
@@ -799,13 +894,6 @@ impl PipelineProcessor {
     }
 }
 
-fn dvo_status_name(status: &DvoStatus) -> String {
-    match status {
-        DvoStatus::Converged => "converged".into(),
-        DvoStatus::Failed(reason) => format!("failed: {reason:?}"),
-    }
-}
-
 impl FrameProcessor for PipelineProcessor {
     fn process(&mut self, frame: &RgbdFrame<'_>) -> Result<ProcessedFrame> {
         let out = self.processor.process(&FrameInput {
@@ -814,23 +902,37 @@ impl FrameProcessor for PipelineProcessor {
             depth_m: frame.depth_m,
             world_from_marker: frame.world_from_camera.as_ref(),
         })?;
-        let (dvo_status, dvo_iterations, dvo_cost) = match (&out.stats.dvo, self.mode) {
-            (_, PoseMode::External) => ("external".to_owned(), 0, 0.0),
-            (Some(d), _) => (
-                dvo_status_name(&d.status),
-                d.iterations_per_level.iter().sum(),
-                d.final_cost,
-            ),
-            (None, _) => ("first_frame".to_owned(), 0, 0.0),
+        let stats = &out.stats;
+        let (dvo_iterations, dvo_cost) = match (&stats.dvo, self.mode) {
+            (Some(d), PoseMode::Dvo | PoseMode::DvoUnmasked) => {
+                (d.iterations_per_level.iter().sum(), d.final_cost)
+            }
+            _ => (0, 0.0),
         };
         Ok(ProcessedFrame {
             mask: out.mask.clone(),
             world_from_camera: out.world_from_camera,
             accumulation: self.keep_accumulation.then(|| out.accumulation_m.clone()),
-            dvo_status,
+            dvo_status: stats.outcome.as_str().to_owned(),
             dvo_iterations,
             dvo_cost,
+            health: FrameHealth {
+                pose_fallback: stats.pose_fallback,
+                consecutive_failures: stats.consecutive_failures,
+                detector_reset: stats.detector_reset,
+                valid_depth_fraction: stats.valid_depth_fraction,
+            },
         })
+    }
+}
+
+/// `value`, or 0 when it is NaN or infinite (JSON has no NaN: serde_json would write `null`,
+/// which the schema's `number` fields reject).
+fn finite_or_zero(value: f64) -> f64 {
+    if value.is_finite() {
+        value
+    } else {
+        0.0
     }
 }
 

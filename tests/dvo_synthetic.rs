@@ -8,15 +8,11 @@ use occmask::geometry::{se3_exp, Twist};
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use occmask::synthetic::{motion_pair, SequenceConfig};
 
-/// Issue 3 targets 1 mm and 0.05° per frame pair. The rotation target is met with a wide
-/// margin (worst measured 0.024°); translation reaches 1.45 mm in the worst static case and
-/// 1.72 mm with the box masked (3° pitch, the room's back wall 4.5 m away), always along the x/yaw or y/pitch ambiguity of a distant
-/// fronto-parallel scene (a 1.4 mm translation there moves the image by 0.03 px at 640×480).
-/// It is a bias of the rendered data (present with a perfect sensor when starting at the truth,
-/// gone when the aliased grazing-angle floor and ceiling are masked), see the README.
-/// The bound below is the measured worst case plus ~35 % regression margin; README "Dense visual
-/// odometry" lists every case.
-const MAX_TRANS_ERR_MM: f64 = 2.5;
+/// Issue 3 targets 1 mm and 0.05° per frame pair. Rotation is met everywhere; translation
+/// reaches 2.45 mm over the 8 seeds (static, 6 motions; 2.03 mm with the box masked), always
+/// along the x/yaw or y/pitch ambiguity of a distant fronto-parallel scene (1.4 mm there moves
+/// the image by 0.03 px at 640×480): a bias of the rendered data, see the README.
+const MAX_TRANS_ERR_MM: f64 = 3.0;
 const MAX_ROT_ERR_DEG: f64 = 0.05;
 
 /// Motions up to 5 cm and 3° per frame, mixing all six directions.
@@ -38,6 +34,163 @@ fn error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> (f64, f64) {
     (e.translation.vector.norm() * 1e3, e.rotation.angle().to_degrees())
 }
 
+/// Seeds of the multi-seed test: each one is a different room texture, box texture and noise.
+const SEEDS: std::ops::RangeInclusive<u64> = 1..=8;
+
+/// Every seed × every motion × {static scene, 30 % box masked, box not masked}: the static and
+/// masked estimates must converge within the bounds; the unmasked ones are reported (the box
+/// drags them several centimetres) and must never be a `Failed` without reason. This is the
+/// regression test for issue 3's wrong-minimum bug: with the old 4-level pyramid, 3° pitch with
+/// the box masked ended 43–310 mm off for seeds 3, 4, 5 and 8 and still said `Converged`.
+#[test]
+fn every_seed_and_motion_converges_within_the_bounds() {
+    let config = DvoConfig::paper();
+    let mut worst = [(0.0f64, 0.0f64); 3];
+    let mut cases = 0;
+    let mut failures = Vec::new();
+    for seed in SEEDS {
+        let seq = SequenceConfig {
+            seed,
+            ..SequenceConfig::default()
+        };
+        for xi in motions() {
+            let truth = se3_exp(&xi);
+            for with_box in [false, true] {
+                let (reference, current) = motion_pair(seq, &truth, with_box);
+                let masks: &[Option<&Mask>] = if with_box {
+                    &[Some(&reference.gt_mask), None]
+                } else {
+                    &[None]
+                };
+                for &mask in masks {
+                    let mode = match (with_box, mask.is_some()) {
+                        (false, _) => 0,
+                        (true, true) => 1,
+                        (true, false) => 2,
+                    };
+                    let mut tracker = DvoTracker::new(seq.size, reference.intrinsics, config).unwrap();
+                    let est = tracker
+                        .estimate_between(
+                            (&reference.gray, &reference.depth_m),
+                            (&current.gray, &current.depth_m),
+                            mask,
+                            None,
+                        )
+                        .unwrap();
+                    let (et, er) = error(&est.current_from_reference, &truth);
+                    cases += 1;
+                    let name = ["static", "masked", "unmasked"][mode];
+                    if mode < 2 {
+                        if est.status != DvoStatus::Converged
+                            || et >= MAX_TRANS_ERR_MM
+                            || er >= MAX_ROT_ERR_DEG
+                        {
+                            failures.push(format!(
+                                "seed {seed} {xi:?} {name}: {et:.3} mm {er:.4} deg {:?}",
+                                est.status
+                            ));
+                        }
+                        worst[mode] = (worst[mode].0.max(et), worst[mode].1.max(er));
+                    } else if est.is_converged() {
+                        worst[mode] = (worst[mode].0.max(et), worst[mode].1.max(er));
+                    }
+                }
+            }
+        }
+    }
+    println!(
+        "{cases} cases ({} seeds × {} motions × static/masked/unmasked): worst static {:.3} mm {:.4} deg, \
+         masked {:.3} mm {:.4} deg, unmasked (converged ones) {:.1} mm {:.3} deg",
+        SEEDS.count(),
+        motions().len(),
+        worst[0].0,
+        worst[0].1,
+        worst[1].0,
+        worst[1].1,
+        worst[2].0,
+        worst[2].1
+    );
+    assert!(
+        failures.is_empty(),
+        "{} of {cases} cases:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
+/// The plausibility check: an estimate that ended in a wrong minimum must not say `Converged`.
+/// With only 4 pyramid levels a 3° pitch is too large for the coarsest level on some seeds;
+/// whatever the solver finds, a converged result must be accurate (the rest must be reported
+/// as failures), and two unrelated views must fail as `PoorFit`.
+#[test]
+fn wrong_minima_are_reported_as_poor_fit_not_converged() {
+    let deg = std::f64::consts::PI / 180.0;
+    let truth = se3_exp(&Twist::new(0.0, 0.0, 0.0, 3.0 * deg, 0.0, 0.0));
+    let four_levels = DvoConfig {
+        levels: 4,
+        ..DvoConfig::paper()
+    };
+    let mut poor = 0;
+    for seed in SEEDS {
+        let seq = SequenceConfig {
+            seed,
+            ..SequenceConfig::default()
+        };
+        let (reference, current) = motion_pair(seq, &truth, true);
+        let mut tracker = DvoTracker::new(seq.size, reference.intrinsics, four_levels).unwrap();
+        let est = tracker
+            .estimate_between(
+                (&reference.gray, &reference.depth_m),
+                (&current.gray, &current.depth_m),
+                Some(&reference.gt_mask),
+                None,
+            )
+            .unwrap();
+        let (et, er) = error(&est.current_from_reference, &truth);
+        println!("4 levels, seed {seed}: {et:.3} mm {er:.4} deg {:?}", est.status);
+        match est.status {
+            DvoStatus::Converged => assert!(
+                et < MAX_TRANS_ERR_MM && er < MAX_ROT_ERR_DEG,
+                "seed {seed}: converged but {et:.3} mm {er:.4} deg off"
+            ),
+            DvoStatus::Failed(DvoFailure::PoorFit {
+                cost_permille,
+                limit_permille,
+            }) => {
+                assert!(cost_permille > limit_permille);
+                assert_eq!(est.current_from_reference, Isometry3::identity());
+                poor += 1;
+            }
+            other => panic!("seed {seed}: {other:?}"),
+        }
+    }
+    println!("4 levels: {poor} of {} seeds reported as PoorFit", SEEDS.count());
+    // Two different rooms (different textures) seen from the same place: nothing matches.
+    let seq = SequenceConfig::default();
+    let (reference, _) = motion_pair(seq, &Isometry3::identity(), false);
+    let (other, _) = motion_pair(
+        SequenceConfig { seed: 1000, ..seq },
+        &Isometry3::identity(),
+        false,
+    );
+    let mut tracker = DvoTracker::new(seq.size, reference.intrinsics, DvoConfig::paper()).unwrap();
+    let est = tracker
+        .estimate_between(
+            (&reference.gray, &reference.depth_m),
+            (&other.gray, &other.depth_m),
+            None,
+            None,
+        )
+        .unwrap();
+    assert!(
+        matches!(est.status, DvoStatus::Failed(DvoFailure::PoorFit { .. })),
+        "{:?} (cost {})",
+        est.status,
+        est.final_cost
+    );
+    assert_finite(&est.current_from_reference);
+}
+
 fn run(xi: &Twist, with_box: bool, use_mask: bool, config: DvoConfig) -> (f64, f64, DvoStatus) {
     let truth = se3_exp(xi);
     let seq = SequenceConfig::default();
@@ -57,7 +210,7 @@ fn run(xi: &Twist, with_box: bool, use_mask: bool, config: DvoConfig) -> (f64, f
 }
 
 #[test]
-fn static_scene_motions_are_recovered_within_2_5mm_and_0_05deg() {
+fn static_scene_motions_are_recovered_within_the_bounds() {
     for xi in motions() {
         let (et, er, status) = run(&xi, false, false, DvoConfig::paper());
         println!("static {xi:?}: {et:.3} mm {er:.4} deg {status:?}");

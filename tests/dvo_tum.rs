@@ -35,6 +35,7 @@ fn fr2_desk_relative_pose_error_is_bounded() {
     let mut tracker = None;
     let (mut errs_t, mut errs_r) = (Vec::new(), Vec::new());
     let mut poses = Vec::new();
+    let mut worst_cost_fraction = 0.0f64;
     for (i, f) in frames.iter().enumerate() {
         let (gray, depth) = tum::load_frame(f).unwrap();
         let tracker = tracker.get_or_insert_with(|| {
@@ -48,6 +49,11 @@ fn fr2_desk_relative_pose_error_is_bounded() {
             continue;
         };
         assert!(est.is_converged(), "pair {}: {:?}", i - 1, est.status);
+        // Final cost per point as a fraction of the saturated bi-square loss (the PoorFit check).
+        let cfg = tracker.config();
+        let k = cfg.k_intensity.at_level(cfg.finest_level);
+        let saturated = f64::from(k * k / 6.0 + cfg.depth_weight_gamma * cfg.k_depth_m * cfg.k_depth_m / 6.0);
+        worst_cost_fraction = worst_cost_fraction.max(est.final_cost / saturated);
         let last = poses[poses.len() - 1].world_from_camera;
         poses.push(StampedPose {
             timestamp_ns: f.timestamp_ns,
@@ -66,8 +72,9 @@ fn fr2_desk_relative_pose_error_is_bounded() {
     }
     let (rt, rr) = (tum::rms(errs_t.iter().copied()), tum::rms(errs_r.iter().copied()));
     println!(
-        "fr2_desk_50: {} pairs, RPE RMSE {rt:.2} mm {rr:.3} deg",
-        errs_t.len()
+        "fr2_desk_50: {} pairs, RPE RMSE {rt:.2} mm {rr:.3} deg, worst final cost {:.3} of saturated",
+        errs_t.len(),
+        worst_cost_fraction
     );
     assert_eq!(errs_t.len(), 49);
     assert!(rt < MAX_RMSE_TRANS_MM, "RPE translation RMSE {rt:.2} mm");

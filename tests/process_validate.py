@@ -11,6 +11,7 @@ Prints one JSON line with per-topic counts; exits 1 on any failure.
 """
 
 import json
+import math
 import sys
 
 from mcap.reader import make_reader
@@ -76,9 +77,13 @@ def main():
                     fail("odometry pose")
             elif topic == "/occmask/stats":
                 for key in ("timestamp", "frame_index", "pose_source", "dvo_status", "dvo_iterations",
-                            "dvo_cost", "moving_fraction", "moving_pixels", "decode_ms", "process_ms"):
+                            "dvo_cost", "pose_fallback", "consecutive_failures", "detector_reset",
+                            "valid_depth_fraction", "moving_fraction", "moving_pixels", "decode_ms", "process_ms"):
                     if key not in decoded:
                         fail(f"stats without {key}")
+                for key in ("dvo_cost", "valid_depth_fraction", "moving_fraction", "decode_ms", "process_ms"):
+                    if not isinstance(decoded[key], (int, float)) or not math.isfinite(decoded[key]):
+                        fail(f"stats {key} = {decoded[key]!r} is not a finite number")
         stats = summary.statistics
         if stats is not None and stats.message_count != sum(counts.values()):
             fail(f"statistics say {stats.message_count} messages, read {sum(counts.values())}")

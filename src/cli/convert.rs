@@ -244,7 +244,13 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     };
     let result = convert_sequence(&seq, &config, BufWriter::new(file), &mut progress);
     bar.finish_and_clear();
-    let (sink, report) = result.with_context(|| format!("cannot convert {}", common.dir.display()))?;
+    let (sink, report) = result.with_context(|| {
+        format!(
+            "cannot convert {} into {}",
+            common.dir.display(),
+            output.temp_path().display()
+        )
+    })?;
     let file = sink
         .into_inner()
         .map_err(|e| e.into_error())

@@ -35,9 +35,23 @@ pub struct EvalArgs {
 ///
 /// # Errors
 /// The first file that cannot be read or has no occmask channels.
-pub fn run(args: EvalArgs, _globals: &Globals) -> anyhow::Result<Outcome> {
+pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     for path in &args.inputs {
         let report = evaluate(path).with_context(|| format!("evaluating {}", path.display()))?;
+        if let Some(t) = &report.truncation {
+            if !globals.quiet {
+                eprintln!(
+                    "warning: {} ends early: {}; scored the {} complete frames before the cut",
+                    path.display(),
+                    if t.messages_intact {
+                        "no message lost (only the summary/index is missing)".to_owned()
+                    } else {
+                        format!("the last {} bytes are lost", t.lost_bytes)
+                    },
+                    report.estimated_masks
+                );
+            }
+        }
         if args.json {
             println!("{}", serde_json::to_string(&report)?);
         } else {

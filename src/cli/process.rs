@@ -362,7 +362,13 @@ fn run_one(
     }
     let mut factory = occmask::process::pipeline_factory(args.accumulation);
     let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
-        .with_context(|| format!("processing {}", job.input.display()))?;
+        .with_context(|| {
+            format!(
+                "processing {} into {}",
+                job.input.display(),
+                output.temp_path().display()
+            )
+        })?;
     let file = sink
         .into_inner()
         .map_err(|e| anyhow!("cannot write {}: {}", output.temp_path().display(), e.error()))?;
@@ -467,13 +473,26 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     for r in &results {
         match &r.outcome {
             Err(e) => eprintln!("error: {}: {e}", r.input.display()),
-            Ok((rep, _)) if rep.input_truncated && !globals.quiet => eprintln!(
-                "warning: {} ends early (unfinished recording): processed and copied everything up to \
-                 its last complete record; `pymcap-cli recover` can rebuild its index",
-                r.input.display()
-            ),
+            Ok((rep, _)) if !globals.quiet => {
+                for w in report_warnings(&r.input, rep) {
+                    eprintln!("warning: {w}");
+                }
+            }
             Ok(_) => {}
         }
+    }
+    if super::signals::interrupted() {
+        // Exit code 130 (main looks for Error::Interrupted): files finished before the signal
+        // are complete; the unfinished ones removed their temporary output.
+        let done = results.len() - failed;
+        return Err(anyhow::Error::new(occmask::Error::Interrupted {
+            done,
+            total: results.len(),
+        }))
+        .context(format!(
+            "stopped by a signal: {done} of {} files were finished and kept",
+            results.len()
+        ));
     }
     if failed > 0 {
         bail!("{failed} of {} files failed", results.len());
@@ -481,6 +500,49 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     // Unpaired frames and frames outside the pose stream are reported in the summary, not an
     // error: colour and depth often run at different rates, and every input message is copied.
     Ok(Outcome::Success)
+}
+
+/// One line per problem of a file that was still processed: a truncated input (what was
+/// lost) and frames skipped for their timestamps.
+fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
+    let mut out = Vec::new();
+    if rep.input_truncated {
+        let lost = match &rep.input_truncation {
+            Some(t) if t.messages_intact => {
+                "no message lost (only the summary/index after the data is missing)".to_owned()
+            }
+            Some(t) => format!(
+                "the last {} bytes (an incomplete record at byte {}) are lost{}",
+                t.lost_bytes,
+                t.intact_bytes,
+                t.lost_log_time_range
+                    .map(|(a, b)| format!(
+                        ", with the messages logged from {} to {} s",
+                        format_ns_as_seconds(a, 6),
+                        format_ns_as_seconds(b, 6)
+                    ))
+                    .unwrap_or_default()
+            ),
+            None => "its last record is incomplete".to_owned(),
+        };
+        out.push(format!(
+            "{} ends early (unfinished recording): {lost}; processed and copied every complete \
+             message ({} frames); the output's occmask.process metadata records the loss; \
+             `mcap recover` can rebuild the input's index",
+            input.display(),
+            rep.frames
+        ));
+    }
+    if rep.out_of_order_frames > 0 {
+        out.push(format!(
+            "{}: skipped {} frame(s) whose colour stamp is not after the previous frame's \
+             (timestamps going backwards or duplicated on {})",
+            input.display(),
+            rep.out_of_order_frames,
+            rep.topics.color.topic
+        ));
+    }
+    out
 }
 
 fn print_summary(results: &[JobResult], jobs: &[Job]) {

@@ -293,8 +293,13 @@ fn image_list(text: &str, source: &Path, root: &Path, require_files: bool) -> Re
         let timestamp_ns = crate::time::parse_seconds_to_ns(fields[0]).map_err(parse_err)?;
         let image_path = root.join(fields[1]);
         if require_files && !image_path.is_file() {
+            let found = if image_path.is_dir() {
+                "is a directory, expected an image file"
+            } else {
+                "does not exist"
+            };
             return Err(parse_err(format!(
-                "listed image {} does not exist",
+                "listed image {} {found}",
                 image_path.display()
             )));
         }

@@ -23,10 +23,15 @@ pub fn load(root: &Path, kind: DatasetKind) -> Result<Sequence> {
             } else {
                 ""
             };
+            let found = if path.is_dir() {
+                "a directory"
+            } else {
+                "no such file"
+            };
             return Err(Error::Dataset {
                 path: path.clone(),
                 message: format!(
-                    "expected {name} listing the {what} images ('timestamp path' per line), found no such file{hint}"
+                    "expected {name} listing the {what} images ('timestamp path' per line), found {found}{hint}"
                 ),
             });
         }
@@ -43,6 +48,13 @@ pub fn load(root: &Path, kind: DatasetKind) -> Result<Sequence> {
     let (depth_list, depth) = list("depth.txt", "depth")?;
     let mut text_files = vec![rgb_list, depth_list];
     let gt_path = root.join("groundtruth.txt");
+    if gt_path.exists() && !gt_path.is_file() {
+        return Err(Error::Dataset {
+            path: gt_path,
+            message: "expected groundtruth.txt to be a text file of poses, found a directory or device"
+                .into(),
+        });
+    }
     let groundtruth = if gt_path.is_file() {
         text_files.push(gt_path.clone());
         read_groundtruth(&gt_path)?

@@ -60,9 +60,10 @@ pub struct CostParams {
 }
 
 impl CostParams {
-    /// Loss of a reference point that cannot be evaluated at all.
+    /// Loss of a reference point that cannot be evaluated at all (or matches nowhere): the
+    /// saturated bi-square loss of both channels.
     #[inline]
-    fn saturated_point(&self) -> f32 {
+    pub fn saturated_point(&self) -> f32 {
         bisquare_saturated(self.k_intensity) + self.depth_weight * bisquare_saturated(self.k_depth_m)
     }
 }

@@ -61,6 +61,17 @@ impl AtomicOutput {
                 ));
             }
         }
+        // Renaming over a device (`-o /dev/null --force` as root) or a FIFO would replace it
+        // with a regular file: only regular files are ever replaced.
+        if let Ok(meta) = std::fs::metadata(final_path) {
+            if !meta.is_file() {
+                return Err(output_error(
+                    final_path,
+                    "a regular file path, found a device, FIFO or socket (occmask writes a temporary \
+                     file and renames it, which would replace the device)",
+                ));
+            }
+        }
         if final_path.exists() && !force {
             return Err(output_error(
                 final_path,

@@ -34,8 +34,10 @@ use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, Image, ImageSize, Mask, MASK_SET};
 
+use rayon::prelude::*;
+
 use components::Components;
-use transport::{TransportInputs, TransportOutputs};
+use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch, UNLABELLED};
 
 /// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -197,10 +199,10 @@ pub struct OcclusionDetector {
     size: ImageSize,
     min_object_pixels: usize,
     frames: u64,
-    /// Normalised ray x per column: (x − cx) / fx.
-    ray_x: Vec<f64>,
-    /// Normalised ray y per row: (y − cy) / fy.
-    ray_y: Vec<f64>,
+    /// Normalised pixel rays (per sequence).
+    rays: PixelRays,
+    /// Scratch of the transport kernel.
+    transport_scratch: TransportScratch,
     /// Compensated depth of the latest frame (m).
     compensated_m: DepthMeters,
     /// Accumulation map A of the latest frame (m).
@@ -217,6 +219,8 @@ pub struct OcclusionDetector {
     newly_discovered: Image<u8>,
     components: Components,
     stats: OcclusionStats,
+    /// Use the f64 scalar reference transport instead of the fast kernel (agreement tests).
+    reference_transport: bool,
 }
 
 impl OcclusionDetector {
@@ -233,11 +237,15 @@ impl OcclusionDetector {
                 expected: "finite values with fx, fy > 0".into(),
             });
         }
-        if size.area() == 0 || size.width > u32::MAX as usize / size.height.max(1) {
+        // Pixel indices are u32 and the warp rounds coordinates through f32 (exact below 2^23).
+        if size.area() == 0
+            || size.width > u32::MAX as usize / size.height.max(1)
+            || size.width.max(size.height) >= 1 << 23
+        {
             return Err(Error::InvalidParameter {
                 name: "image size",
                 value: size.to_string(),
-                expected: "a non-empty image with fewer than 2^32 pixels".into(),
+                expected: "a non-empty image with fewer than 2^32 pixels and sides below 2^23".into(),
             });
         }
         let depth = || Image::filled(size, 0.0f32);
@@ -247,12 +255,8 @@ impl OcclusionDetector {
             size,
             min_object_pixels: config.min_object_pixels(size),
             frames: 0,
-            ray_x: (0..size.width)
-                .map(|x| (x as f64 - intrinsics.cx) / intrinsics.fx)
-                .collect(),
-            ray_y: (0..size.height)
-                .map(|y| (y as f64 - intrinsics.cy) / intrinsics.fy)
-                .collect(),
+            rays: PixelRays::new(&intrinsics, size.width, size.height),
+            transport_scratch: TransportScratch::new(size.width, size.height),
             compensated_m: depth(),
             accumulation_m: depth(),
             predicted: Image::filled(size, 0),
@@ -264,6 +268,7 @@ impl OcclusionDetector {
             newly_discovered: Image::filled(size, 0),
             components: Components::new(size),
             stats: OcclusionStats::default(),
+            reference_transport: false,
         })
     }
 
@@ -355,8 +360,7 @@ impl OcclusionDetector {
         let started = Instant::now();
         let previous_from_current = current_from_previous.inverse();
         let inputs = TransportInputs {
-            ray_x: &self.ray_x,
-            ray_y: &self.ray_y,
+            rays: &self.rays,
             intrinsics: &self.intrinsics,
             previous_from_current: &previous_from_current,
             config: &self.config,
@@ -371,8 +375,13 @@ impl OcclusionDetector {
             predicted_carried: &mut self.predicted_carried,
             delta_z_m: &mut self.delta_z_m,
             newly_discovered: &mut self.newly_discovered,
+            object_labels: self.components.labels_mut(),
         };
-        let counts = transport::transport(&inputs, outputs);
+        let counts = if self.reference_transport {
+            transport::transport_scalar(&inputs, outputs)
+        } else {
+            transport::transport(&inputs, &mut self.transport_scratch, outputs)
+        };
         self.stats.warped_pixels = counts.warped;
         self.stats.newly_discovered_pixels = counts.newly_discovered;
         std::mem::swap(&mut self.compensated_m, &mut self.compensated_next_m);
@@ -383,6 +392,7 @@ impl OcclusionDetector {
         let label_stats = self.components.suppress_and_predict(
             &self.config,
             self.min_object_pixels,
+            counts.object_bounds,
             &self.compensated_m,
             &self.newly_discovered,
             &mut self.accumulation_m,
@@ -394,35 +404,24 @@ impl OcclusionDetector {
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
-        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3).
-        // The same pass counts O and P: pruning only removes pixels of P ⊆ O, so the mask
-        // size is |O| − pruned, and pruning is skipped when P is empty.
-        let predicting = self.config.predict_newly_discovered;
-        let (mut object_pixels, mut predicted_pixels) = (0usize, 0usize);
-        for ((((m, p), &a), &z), (&carried, &newly)) in self
-            .mask
-            .as_mut_slice()
-            .iter_mut()
-            .zip(self.predicted.as_mut_slice())
-            .zip(self.accumulation_m.as_slice())
-            .zip(self.compensated_m.as_slice())
-            .zip(
-                self.predicted_carried
-                    .as_slice()
-                    .iter()
-                    .zip(self.newly_discovered.as_slice()),
-            )
-        {
-            let object = a > self.config.threshold(self.config.alpha, z);
-            let predicted = predicting && object && (carried != 0 || newly != 0);
-            *m = if object { MASK_SET } else { 0 };
-            *p = u8::from(predicted);
-            object_pixels += usize::from(object);
-            predicted_pixels += usize::from(predicted);
-        }
-        if predicted_pixels > 0 {
+        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3) and the
+        // pruning's label input. Pruning only removes pixels of P ⊆ O, so the mask size is
+        // |O| − pruned, and pruning is skipped when P is empty.
+        let objects = object_mask(
+            &self.config,
+            &self.accumulation_m,
+            &self.compensated_m,
+            &self.predicted_carried,
+            &self.newly_discovered,
+            &mut self.mask,
+            &mut self.predicted,
+            self.components.labels_mut(),
+        );
+        let object_pixels = objects.object;
+        if let Some(bounds) = objects.predicted_bounds {
             self.stats.pruned_pixels = self.components.prune_unattached_predictions(
                 self.config.prune_adjacency,
+                bounds,
                 &self.predicted,
                 &mut self.mask,
                 &mut self.accumulation_m,
@@ -436,6 +435,85 @@ impl OcclusionDetector {
         self.stats.prune_us = started.elapsed().as_micros() as u64;
         Ok(&self.mask)
     }
+}
+
+/// Counts of the object-mask pass.
+#[derive(Debug, Clone, Copy, Default)]
+struct ObjectCounts {
+    /// Pixels of O.
+    object: usize,
+    /// Rows holding predicted object pixels (x range unused), None when P is empty.
+    predicted_bounds: Option<PixelBounds>,
+}
+
+/// Steps 11–12 input, row-parallel: O = {A > τ_α} into `mask`, P = (P̂ ∨ Ñ) ∧ O into
+/// `predicted` (all 0 when prediction is off), and `labels` = [`UNLABELLED`] on P, 0 elsewhere.
+#[allow(clippy::too_many_arguments)]
+fn object_mask(
+    config: &OcclusionConfig,
+    accumulation_m: &DepthMeters,
+    compensated_m: &DepthMeters,
+    predicted_carried: &Image<u8>,
+    newly_discovered: &Image<u8>,
+    mask: &mut Mask,
+    predicted: &mut Image<u8>,
+    labels: &mut [u32],
+) -> ObjectCounts {
+    let width = mask.width();
+    let chunk = transport::ROWS_PER_TASK * width;
+    let predicting = config.predict_newly_discovered;
+    mask.as_mut_slice()
+        .par_chunks_mut(chunk)
+        .zip(predicted.as_mut_slice().par_chunks_mut(chunk))
+        .zip(labels[..accumulation_m.size().area()].par_chunks_mut(chunk))
+        .enumerate()
+        .map(|(task, ((m_rows, p_rows), label_rows))| {
+            let mut counts = ObjectCounts::default();
+            let start = task * chunk;
+            let end = start + m_rows.len();
+            let a = &accumulation_m.as_slice()[start..end];
+            let z = &compensated_m.as_slice()[start..end];
+            let carried = &predicted_carried.as_slice()[start..end];
+            let newly = &newly_discovered.as_slice()[start..end];
+            let (p_rows, label_rows) = (&mut p_rows[..m_rows.len()], &mut label_rows[..m_rows.len()]);
+            // Single-width loops so each vectorises: f32 → u8 mask, u8 → u8 P, u8 → u32 labels.
+            let quadratic = config.threshold_form == ThresholdForm::Quadratic;
+            let alpha = config.alpha;
+            let mut object_count = 0u32;
+            for i in 0..m_rows.len() {
+                // (α·Z)·Z or (α·Z)·1: exactly `OcclusionConfig::threshold`.
+                let z_or_one = if quadratic { z[i] } else { 1.0 };
+                let object = a[i] > alpha * z[i] * z_or_one;
+                m_rows[i] = if object { MASK_SET } else { 0 };
+                object_count += u32::from(object);
+            }
+            counts.object = object_count as usize;
+            let keep = if predicting { u8::MAX } else { 0 };
+            let mut predicted_rows = 0u32;
+            for i in 0..m_rows.len() {
+                let is_predicted = m_rows[i] & (carried[i] | newly[i]) & keep != 0;
+                p_rows[i] = u8::from(is_predicted);
+                predicted_rows += u32::from(is_predicted);
+            }
+            for (label, &p) in label_rows.iter_mut().zip(p_rows.iter()) {
+                *label = if p != 0 { UNLABELLED } else { 0 };
+            }
+            if predicted_rows > 0 {
+                let y0 = start / width;
+                let y1 = end / width - 1;
+                counts.predicted_bounds = Some(PixelBounds {
+                    x0: 0,
+                    x1: width - 1,
+                    y0,
+                    y1,
+                });
+            }
+            counts
+        })
+        .reduce(ObjectCounts::default, |a, b| ObjectCounts {
+            object: a.object + b.object,
+            predicted_bounds: PixelBounds::union(a.predicted_bounds, b.predicted_bounds),
+        })
 }
 
 #[cfg(test)]

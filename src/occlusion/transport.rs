@@ -1,27 +1,113 @@
 //! Per-pixel state transport (algorithm.md §1 steps 2–9): warp field, depth compensation,
-//! occlusion map ΔZ, carried A and P, accumulation, truncations and the newly discovered area.
+//! occlusion map ΔZ, carried A and P, accumulation, truncations and the newly discovered area,
+//! plus the initial labels of the object set {A > τ_α} (step 10's input) and its bounding box.
 //!
 //! [`transport`] is the fused, row-parallel kernel used by the detector; [`transport_scalar`]
-//! is a literal step-by-step reference (one full-image pass per step, nalgebra projection) kept
-//! for the agreement test.
+//! is a literal step-by-step reference (one full-image pass per step, f64 nalgebra projection)
+//! kept for the agreement test.
+//!
+//! The fast kernel warps in f32: per frame it precomputes R·(x−cx)/fx per column, so the
+//! rotated ray of pixel (x, y) is that column term plus a per-row term, a point is ray·Z + t, and
+//! the projection takes one reciprocal. Per row it first computes every pixel's warp source in a
+//! branch-free loop the compiler vectorises, then gathers and finishes the pixels. f32 changes
+//! the nearest-pixel rounding only for warps within ≈ 1e-4 px of a half-pixel boundary (the
+//! agreement test bounds how many pixels that may affect).
 
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
-use super::{OcclusionConfig, WarpDepth};
+use super::{OcclusionConfig, ThresholdForm, WarpDepth};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, Image};
 
-/// Rows per rayon task: one VGA row costs ≈ 2 µs, so 16 rows (≈ 30 µs) amortise the task
+/// Rows per rayon task: one VGA row costs ≈ 1 µs, so 16 rows (≈ 15 µs) amortise the task
 /// overhead while 30 tasks per frame still balance two to eight cores.
-const ROWS_PER_TASK: usize = 16;
+pub const ROWS_PER_TASK: usize = 16;
+
+/// Label value of an object pixel not yet assigned to a component (the labelling's input).
+pub const UNLABELLED: u32 = u32::MAX;
+
+/// 2^23: the smallest f32 whose ulp is 1 (see `warp_row`'s rounding).
+const ROUND_MAGIC: f32 = 8_388_608.0;
+
+/// Warp source of a pixel whose warp is invalid.
+const NO_SOURCE: u32 = u32::MAX;
+
+/// Inclusive bounding box of a pixel set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PixelBounds {
+    /// First column.
+    pub x0: usize,
+    /// Last column.
+    pub x1: usize,
+    /// First row.
+    pub y0: usize,
+    /// Last row.
+    pub y1: usize,
+}
+
+impl PixelBounds {
+    /// The box of both (either may be absent).
+    pub fn union(a: Option<Self>, b: Option<Self>) -> Option<Self> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(Self {
+                x0: a.x0.min(b.x0),
+                x1: a.x1.max(b.x1),
+                y0: a.y0.min(b.y0),
+                y1: a.y1.max(b.y1),
+            }),
+            (a, None) => a,
+            (None, b) => b,
+        }
+    }
+}
+
+/// Per-sequence normalised rays of the pixel grid (f32; the f64 reference uses the intrinsics).
+#[derive(Debug, Clone)]
+pub struct PixelRays {
+    /// (x − cx)/fx per column.
+    pub ray_x: Vec<f32>,
+    /// (y − cy)/fy per row.
+    pub ray_y: Vec<f32>,
+}
+
+impl PixelRays {
+    /// The rays of a `width` × `height` grid.
+    pub fn new(intrinsics: &PinholeIntrinsics, width: usize, height: usize) -> Self {
+        Self {
+            ray_x: (0..width)
+                .map(|x| ((x as f64 - intrinsics.cx) / intrinsics.fx) as f32)
+                .collect(),
+            ray_y: (0..height)
+                .map(|y| ((y as f64 - intrinsics.cy) / intrinsics.fy) as f32)
+                .collect(),
+        }
+    }
+}
+
+/// Per-sequence scratch of the fast kernel (allocated once).
+#[derive(Debug, Clone)]
+pub struct TransportScratch {
+    /// R·ray_x per column, one vector per component of the rotated ray (per frame).
+    column_terms: [Vec<f32>; 3],
+    /// Warp source (pixel index into the previous frame, or `NO_SOURCE`) per pixel.
+    sources: Vec<u32>,
+}
+
+impl TransportScratch {
+    /// Scratch for a `width` × `height` image.
+    pub fn new(width: usize, height: usize) -> Self {
+        Self {
+            column_terms: [vec![0.0; width], vec![0.0; width], vec![0.0; width]],
+            sources: vec![NO_SOURCE; width * height],
+        }
+    }
+}
 
 /// Read-only inputs of the transport step.
 pub struct TransportInputs<'a> {
-    /// Normalised ray x per column, (x − cx)/fx.
-    pub ray_x: &'a [f64],
-    /// Normalised ray y per row, (y − cy)/fy.
-    pub ray_y: &'a [f64],
+    /// Normalised pixel rays (fast kernel only).
+    pub rays: &'a PixelRays,
     /// Camera intrinsics.
     pub intrinsics: &'a PinholeIntrinsics,
     /// exp(−ξ): maps current-camera points into the previous camera.
@@ -50,6 +136,8 @@ pub struct TransportOutputs<'a> {
     pub delta_z_m: &'a mut DepthMeters,
     /// Ñ (0 / 1).
     pub newly_discovered: &'a mut Image<u8>,
+    /// [`UNLABELLED`] where A > τ_α (the object set O₀), else 0; one entry per pixel.
+    pub object_labels: &'a mut [u32],
 }
 
 /// Pixel counts of one transport.
@@ -59,27 +147,67 @@ pub struct TransportCounts {
     pub warped: usize,
     /// Pixels in Ñ.
     pub newly_discovered: usize,
+    /// Pixels in the object set O₀.
+    pub object: usize,
+    /// Bounding box of O₀ (None when empty).
+    pub object_bounds: Option<PixelBounds>,
 }
 
-/// The fused row-parallel transport kernel.
-pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) -> TransportCounts {
+impl TransportCounts {
+    fn merge(a: Self, b: Self) -> Self {
+        Self {
+            warped: a.warped + b.warped,
+            newly_discovered: a.newly_discovered + b.newly_discovered,
+            object: a.object + b.object,
+            object_bounds: PixelBounds::union(a.object_bounds, b.object_bounds),
+        }
+    }
+}
+
+/// The fused row-parallel transport kernel (f32 warp). Also writes the object labels O₀.
+pub fn transport(
+    inputs: &TransportInputs<'_>,
+    scratch: &mut TransportScratch,
+    outputs: TransportOutputs<'_>,
+) -> TransportCounts {
     let width = inputs.depth_m.width();
     let height = inputs.depth_m.height();
-    let (max_x, max_y) = ((width - 1) as f64, (height - 1) as f64);
+    let area = width * height;
     let rotation = inputs
         .previous_from_current
         .rotation
         .to_rotation_matrix()
-        .into_inner();
-    let translation = inputs.previous_from_current.translation.vector;
+        .into_inner()
+        .cast::<f32>();
+    let translation = inputs.previous_from_current.translation.vector.cast::<f32>();
+    // Per frame: R[:,0]·ray_x per column.
+    for (axis, terms) in scratch.column_terms.iter_mut().enumerate() {
+        for (term, &ray_x) in terms.iter_mut().zip(&inputs.rays.ray_x) {
+            *term = rotation[(axis, 0)] * ray_x;
+        }
+    }
     let k = inputs.intrinsics;
+    let warp = WarpParameters {
+        translation: [translation.x, translation.y, translation.z],
+        focal: [k.fx as f32, k.fy as f32],
+        centre: [k.cx as f32, k.cy as f32],
+        max: [(width - 1) as f32, (height - 1) as f32],
+        width: width as u32,
+    };
     let geometric = inputs.config.warp_depth == WarpDepth::Current;
-    let column0 = rotation.column(0);
+    let finish = FinishParameters {
+        geometric,
+        quadratic: inputs.config.threshold_form == ThresholdForm::Quadratic,
+        alpha: inputs.config.alpha,
+        beta: inputs.config.beta,
+    };
+    let [terms_x, terms_y, terms_z] = &scratch.column_terms;
+    let (terms_x, terms_y, terms_z) = (&terms_x[..width], &terms_y[..width], &terms_z[..width]);
+    // Gathers read these at warp sources (< area by construction; sliced so the bound is known).
+    let previous_zc = &inputs.compensated_previous_m.as_slice()[..area];
+    let previous_a = &inputs.accumulation_previous_m.as_slice()[..area];
+    let previous_p = &inputs.predicted_previous.as_slice()[..area];
     let chunk = ROWS_PER_TASK * width;
-    let config = inputs.config;
-    let previous_zc = inputs.compensated_previous_m.as_slice();
-    let previous_a = inputs.accumulation_previous_m.as_slice();
-    let previous_p = inputs.predicted_previous.as_slice();
     outputs
         .compensated_m
         .as_mut_slice()
@@ -88,93 +216,320 @@ pub fn transport(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) ->
         .zip(outputs.predicted_carried.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.delta_z_m.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.newly_discovered.as_mut_slice().par_chunks_mut(chunk))
+        .zip(outputs.object_labels[..area].par_chunks_mut(chunk))
+        .zip(scratch.sources.par_chunks_mut(chunk))
         .enumerate()
-        .map(|(task, ((((zc_rows, a_rows), p_rows), dz_rows), n_rows))| {
-            let mut counts = TransportCounts::default();
-            for (row, ((((zc_row, a_row), p_row), dz_row), n_row)) in zc_rows
-                .chunks_exact_mut(width)
-                .zip(a_rows.chunks_exact_mut(width))
-                .zip(p_rows.chunks_exact_mut(width))
-                .zip(dz_rows.chunks_exact_mut(width))
-                .zip(n_rows.chunks_exact_mut(width))
-                .enumerate()
-            {
-                let y = task * ROWS_PER_TASK + row;
-                let ray_y = inputs.ray_y[y];
-                // R·(rx, ry, 1) = rx·R[:,0] + (ry·R[:,1] + R[:,2]); the bracket is constant per row.
-                let row_term = rotation.column(1) * ray_y + rotation.column(2);
-                let previous_row = inputs.compensated_previous_m.row(y);
-                let measured_row = inputs.depth_m.row(y);
-                for (x, ((((((zc, a), p), dz), n), &measured), &previous)) in zc_row
-                    .iter_mut()
-                    .zip(a_row.iter_mut())
-                    .zip(p_row.iter_mut())
-                    .zip(dz_row.iter_mut())
-                    .zip(n_row.iter_mut())
-                    .zip(measured_row)
-                    .zip(previous_row)
-                    .enumerate()
+        .map(
+            |(task, ((((((zc_rows, a_rows), p_rows), dz_rows), n_rows), label_rows), source_rows))| {
+                let mut counts = TransportCounts::default();
+                let rows = zc_rows
+                    .chunks_exact_mut(width)
+                    .zip(a_rows.chunks_exact_mut(width))
+                    .zip(p_rows.chunks_exact_mut(width))
+                    .zip(dz_rows.chunks_exact_mut(width))
+                    .zip(n_rows.chunks_exact_mut(width))
+                    .zip(label_rows.chunks_exact_mut(width))
+                    .zip(source_rows.chunks_exact_mut(width));
+                for (row, ((((((zc_row, a_row), p_row), dz_row), n_row), label_row), source_row)) in
+                    rows.enumerate()
                 {
-                    let use_current = geometric && measured > 0.0;
-                    let z_back_projected = if use_current { measured } else { previous } as f64;
-                    let mut source = usize::MAX;
-                    let mut warped_depth_m = 0.0f32;
-                    if z_back_projected > 0.0 {
-                        let z = z_back_projected;
-                        let ray_x = inputs.ray_x[x];
-                        let qx = z * (column0.x * ray_x + row_term.x) + translation.x;
-                        let qy = z * (column0.y * ray_x + row_term.y) + translation.y;
-                        let qz = z * (column0.z * ray_x + row_term.z) + translation.z;
-                        if qz > 0.0 {
-                            let u = k.fx * qx / qz + k.cx;
-                            let v = k.fy * qy / qz + k.cy;
-                            if (0.0..=max_x).contains(&u) && (0.0..=max_y).contains(&v) {
-                                // Nearest pixel: both coordinates are ≥ 0, so +0.5 and truncation round.
-                                source = (v + 0.5) as usize * width + (u + 0.5) as usize;
-                                warped_depth_m = qz as f32;
-                            }
+                    let y = task * ROWS_PER_TASK + row;
+                    let measured_row = inputs.depth_m.row(y);
+                    let previous_row = inputs.compensated_previous_m.row(y);
+                    // Rotated ray = column term + row term, row term = R[:,1]·ray_y + R[:,2].
+                    let ray_y = inputs.rays.ray_y[y];
+                    let row_term = [0, 1, 2].map(|axis| rotation[(axis, 1)] * ray_y + rotation[(axis, 2)]);
+                    // Pass 1: the back-projection depth into the ΔZ row, then the warp source of
+                    // every pixel (the ΔZ row now holds z′ until pass 2 reads it).
+                    if geometric {
+                        for ((z, &measured), &previous) in
+                            dz_row.iter_mut().zip(measured_row).zip(previous_row)
+                        {
+                            *z = if measured > 0.0 { measured } else { previous };
                         }
-                    }
-                    // Steps 3–9 (as `finish_pixel`, inlined on hoisted slices).
-                    let warped = source != usize::MAX;
-                    let (sampled_m, accumulation_carried, predicted_carried) = if warped {
-                        (previous_zc[source], previous_a[source], previous_p[source])
                     } else {
-                        (0.0, 0.0, 0)
-                    };
-                    let compensated_m = if measured > 0.0 { measured } else { sampled_m };
-                    let compared_m = if use_current && warped {
-                        warped_depth_m
-                    } else {
-                        compensated_m
-                    };
-                    let delta_z_m = if warped { sampled_m - compared_m } else { 0.0 };
-                    let mut accumulation_m = accumulation_carried + delta_z_m;
-                    if accumulation_m <= config.threshold(config.alpha, compensated_m) {
-                        accumulation_m = 0.0;
+                        dz_row.copy_from_slice(previous_row);
                     }
-                    if delta_z_m <= -config.threshold(config.beta, compensated_m) {
-                        accumulation_m = 0.0;
+                    warp_row(&warp, row_term, (terms_x, terms_y, terms_z), dz_row, source_row);
+                    // Pass 2: gather and finish (steps 3–9) and the object labels.
+                    let row_counts = finish_row(
+                        &finish,
+                        measured_row,
+                        source_row,
+                        (previous_zc, previous_a, previous_p),
+                        FinishRow {
+                            compensated_m: zc_row,
+                            accumulation_m: a_row,
+                            predicted_carried: p_row,
+                            delta_z_m: dz_row,
+                            newly_discovered: n_row,
+                            object_labels: label_row,
+                        },
+                    );
+                    counts.warped += row_counts.warped;
+                    counts.newly_discovered += row_counts.newly_discovered;
+                    counts.object += row_counts.object;
+                    let (first, last) = row_counts.object_columns;
+                    if first != usize::MAX {
+                        let bounds = PixelBounds {
+                            x0: first,
+                            x1: last,
+                            y0: y,
+                            y1: y,
+                        };
+                        counts.object_bounds = PixelBounds::union(counts.object_bounds, Some(bounds));
                     }
-                    let newly = compensated_m > 0.0 && sampled_m == 0.0;
-                    *zc = compensated_m;
-                    *a = accumulation_m;
-                    *p = predicted_carried;
-                    *dz = delta_z_m;
-                    *n = u8::from(newly);
-                    counts.warped += usize::from(warped);
-                    counts.newly_discovered += usize::from(newly);
                 }
-            }
-            counts
-        })
-        .reduce(TransportCounts::default, |a, b| TransportCounts {
-            warped: a.warped + b.warped,
-            newly_discovered: a.newly_discovered + b.newly_discovered,
-        })
+                counts
+            },
+        )
+        .reduce(TransportCounts::default, TransportCounts::merge)
 }
 
-/// Reference implementation: the algorithm.md §1 steps as separate full-image passes, with
+/// Per-frame constants of the f32 warp.
+struct WarpParameters {
+    /// t of previous_from_current (m).
+    translation: [f32; 3],
+    /// fx, fy.
+    focal: [f32; 2],
+    /// cx, cy.
+    centre: [f32; 2],
+    /// W − 1, H − 1: the last valid coordinates.
+    max: [f32; 2],
+    width: u32,
+}
+
+/// One row of the warp (algorithm.md §1 step 2): `z_then_qz` holds the back-projection depth
+/// on entry and the warped point's depth z′ on return; `sources` gets the nearest previous
+/// pixel or `NO_SOURCE`. Branch-free, on equal-length slices, so it vectorises.
+#[inline(never)]
+fn warp_row(
+    warp: &WarpParameters,
+    row_term: [f32; 3],
+    (terms_x, terms_y, terms_z): (&[f32], &[f32], &[f32]),
+    z_then_qz: &mut [f32],
+    sources: &mut [u32],
+) {
+    let n = z_then_qz.len();
+    let (terms_x, terms_y, terms_z, sources) =
+        (&terms_x[..n], &terms_y[..n], &terms_z[..n], &mut sources[..n]);
+    let [tx, ty, tz] = warp.translation;
+    let [fx, fy] = warp.focal;
+    let [cx, cy] = warp.centre;
+    let [max_x, max_y] = warp.max;
+    for i in 0..n {
+        let z = z_then_qz[i];
+        let qx = z * (terms_x[i] + row_term[0]) + tx;
+        let qy = z * (terms_y[i] + row_term[1]) + ty;
+        let qz = z * (terms_z[i] + row_term[2]) + tz;
+        let inverse_z = 1.0 / qz;
+        let u = fx * qx * inverse_z + cx;
+        let v = fy * qy * inverse_z + cy;
+        let valid = (z > 0.0) & (qz > 0.0) & (u >= 0.0) & (u <= max_x) & (v >= 0.0) & (v <= max_y);
+        // Nearest pixel of the coordinates clamped into the image (so invalid pixels convert
+        // too): adding 2^23 rounds a float in [0, 2^23) to an integer (ties
+        // to even), whose bits minus those of 2^23 are that integer. Unlike `as`, this
+        // vectorises on SSE2.
+        let column = (clamp_coordinate(u, max_x) + ROUND_MAGIC).to_bits() - ROUND_MAGIC.to_bits();
+        let line = (clamp_coordinate(v, max_y) + ROUND_MAGIC).to_bits() - ROUND_MAGIC.to_bits();
+        let source = line * warp.width + column;
+        sources[i] = if valid { source } else { NO_SOURCE };
+        z_then_qz[i] = qz;
+    }
+}
+
+/// `value` clamped into [0, max], NaN → 0. Written as two selects (one SSE `maxps`/`minps`
+/// each) rather than `f32::max`/`min`, whose NaN rules cost extra instructions per lane.
+#[inline(always)]
+fn clamp_coordinate(value: f32, max: f32) -> f32 {
+    let at_least_zero = if value > 0.0 { value } else { 0.0 };
+    if at_least_zero < max {
+        at_least_zero
+    } else {
+        max
+    }
+}
+
+/// Per-frame constants of steps 3–9.
+struct FinishParameters {
+    geometric: bool,
+    quadratic: bool,
+    alpha: f32,
+    beta: f32,
+}
+
+/// Output rows of [`finish_row`].
+struct FinishRow<'a> {
+    compensated_m: &'a mut [f32],
+    accumulation_m: &'a mut [f32],
+    predicted_carried: &'a mut [u8],
+    /// z′ on entry (geometric mode), ΔZ on return.
+    delta_z_m: &'a mut [f32],
+    newly_discovered: &'a mut [u8],
+    object_labels: &'a mut [u32],
+}
+
+/// Counts of one row.
+struct RowCounts {
+    warped: usize,
+    newly_discovered: usize,
+    object: usize,
+    /// First and last object column (usize::MAX, 0 when none).
+    object_columns: (usize, usize),
+}
+
+/// Pixels per block of [`finish_row`]: the gathered values live in stack arrays this long
+/// (1.1 KB, in L1) between the gather loop and the vectorised finishing loop.
+const FINISH_BLOCK: usize = 128;
+
+/// One row of steps 3–9 plus the object labels: per block of pixels, gathers the previous Zc,
+/// A, P at the warp sources (scalar loads), then finishes every pixel in a branch-free loop the
+/// compiler vectorises.
+#[inline(never)]
+fn finish_row(
+    finish: &FinishParameters,
+    measured_row: &[f32],
+    sources: &[u32],
+    (previous_zc, previous_a, previous_p): (&[f32], &[f32], &[u8]),
+    out: FinishRow<'_>,
+) -> RowCounts {
+    let n = measured_row.len();
+    let last_pixel = previous_zc.len() - 1;
+    let (previous_a, previous_p) = (&previous_a[..=last_pixel], &previous_p[..=last_pixel]);
+    let mut counts = RowCounts {
+        warped: 0,
+        newly_discovered: 0,
+        object: 0,
+        object_columns: (usize::MAX, 0),
+    };
+    let mut start = 0;
+    while start < n {
+        let len = FINISH_BLOCK.min(n - start);
+        let end = start + len;
+        let sources = &sources[start..end];
+        let mut sampled = [0.0f32; FINISH_BLOCK];
+        let mut carried_a = [0.0f32; FINISH_BLOCK];
+        let mut carried_p = [0u8; FINISH_BLOCK];
+        // Gather (an invalid source reads pixel `last_pixel`, discarded below).
+        for (i, &source) in sources.iter().enumerate() {
+            let at = (source as usize).min(last_pixel);
+            sampled[i] = previous_zc[at];
+            carried_a[i] = previous_a[at];
+            carried_p[i] = previous_p[at];
+        }
+        let measured = &measured_row[start..end];
+        let zc_row = &mut out.compensated_m[start..end];
+        let a_row = &mut out.accumulation_m[start..end];
+        let p_row = &mut out.predicted_carried[start..end];
+        let dz_row = &mut out.delta_z_m[start..end];
+        let n_row = &mut out.newly_discovered[start..end];
+        let label_row = &mut out.object_labels[start..end];
+        // Three single-width loops (f32; f32 → u32; to u8) so each one vectorises.
+        let warped_count = finish_block(
+            finish,
+            sources,
+            measured,
+            (&mut sampled[..len], &carried_a[..len]),
+            zc_row,
+            a_row,
+            dz_row,
+        );
+        let object_count = object_labels_block(finish, zc_row, a_row, label_row);
+        let newly_count = flags_block(sources, &sampled[..len], zc_row, &carried_p[..len], n_row, p_row);
+        counts.warped += warped_count as usize;
+        counts.newly_discovered += newly_count as usize;
+        counts.object += object_count as usize;
+        if object_count > 0 {
+            let first = label_row.iter().position(|&l| l != 0).unwrap_or(0);
+            let last = label_row.iter().rposition(|&l| l != 0).unwrap_or(0);
+            counts.object_columns.0 = counts.object_columns.0.min(start + first);
+            counts.object_columns.1 = start + last;
+        }
+        start = end;
+    }
+    counts
+}
+
+/// Steps 3–8 on one block (f32 only; every slice a separate argument so the compiler knows
+/// they do not alias and vectorises): `sampled` gets the validity-masked previous depth, ΔZ
+/// holds z′ on entry (geometric mode). Returns the warped pixels.
+#[inline(never)]
+fn finish_block(
+    finish: &FinishParameters,
+    sources: &[u32],
+    measured: &[f32],
+    (sampled, carried_a): (&mut [f32], &[f32]),
+    zc_row: &mut [f32],
+    a_row: &mut [f32],
+    dz_row: &mut [f32],
+) -> u32 {
+    let len = sources.len();
+    let (measured, sampled, carried_a) = (&measured[..len], &mut sampled[..len], &carried_a[..len]);
+    let (zc_row, a_row, dz_row) = (&mut zc_row[..len], &mut a_row[..len], &mut dz_row[..len]);
+    let (alpha, beta, quadratic, geometric) = (finish.alpha, finish.beta, finish.quadratic, finish.geometric);
+    let mut warped_count = 0u32;
+    for i in 0..len {
+        let warped = sources[i] != NO_SOURCE;
+        let sampled_m = if warped { sampled[i] } else { 0.0 };
+        sampled[i] = sampled_m;
+        let measured_m = measured[i];
+        let compensated_m = if measured_m > 0.0 { measured_m } else { sampled_m };
+        let use_z_prime = geometric & (measured_m > 0.0) & warped;
+        let compared_m = if use_z_prime { dz_row[i] } else { compensated_m };
+        let delta_z_m = if warped { sampled_m - compared_m } else { 0.0 };
+        // τ = (coefficient·Z)·Z or (coefficient·Z)·1, exactly `OcclusionConfig::threshold`.
+        let z_or_one = if quadratic { compensated_m } else { 1.0 };
+        let tau_alpha = alpha * compensated_m * z_or_one;
+        let tau_beta = beta * compensated_m * z_or_one;
+        let accumulation = (if warped { carried_a[i] } else { 0.0 }) + delta_z_m;
+        let truncated = (accumulation <= tau_alpha) | (delta_z_m <= -tau_beta);
+        zc_row[i] = compensated_m;
+        a_row[i] = if truncated { 0.0 } else { accumulation };
+        dz_row[i] = delta_z_m;
+        warped_count += u32::from(warped);
+    }
+    warped_count
+}
+
+/// O₀ labels of one block: [`UNLABELLED`] where A > τ_α. Returns the object pixels.
+#[inline(never)]
+fn object_labels_block(finish: &FinishParameters, zc_row: &[f32], a_row: &[f32], labels: &mut [u32]) -> u32 {
+    let len = labels.len();
+    let (zc_row, a_row) = (&zc_row[..len], &a_row[..len]);
+    let mut object_count = 0u32;
+    for i in 0..len {
+        let z_or_one = if finish.quadratic { zc_row[i] } else { 1.0 };
+        let object = a_row[i] > finish.alpha * zc_row[i] * z_or_one;
+        labels[i] = if object { UNLABELLED } else { 0 };
+        object_count += u32::from(object);
+    }
+    object_count
+}
+
+/// Ñ and P̂ of one block (`sampled` already masked by validity). Returns |Ñ|.
+#[inline(never)]
+fn flags_block(
+    sources: &[u32],
+    sampled: &[f32],
+    zc_row: &[f32],
+    carried_p: &[u8],
+    newly_row: &mut [u8],
+    p_row: &mut [u8],
+) -> u32 {
+    let len = sources.len();
+    let (sampled, zc_row, carried_p) = (&sampled[..len], &zc_row[..len], &carried_p[..len]);
+    let (newly_row, p_row) = (&mut newly_row[..len], &mut p_row[..len]);
+    let mut newly_count = 0u32;
+    for i in 0..len {
+        let newly = (zc_row[i] > 0.0) & (sampled[i] == 0.0);
+        newly_row[i] = u8::from(newly);
+        p_row[i] = if sources[i] != NO_SOURCE { carried_p[i] } else { 0 };
+        newly_count += u32::from(newly);
+    }
+    newly_count
+}
+
+/// Reference implementation: the algorithm.md §1 steps as separate full-image passes, with f64
 /// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
 pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) -> TransportCounts {
     let size = inputs.depth_m.size();
@@ -211,20 +566,17 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<
     }
     // Steps 3–9, pixel by pixel in the documented order.
     let mut counts = TransportCounts::default();
+    let config = inputs.config;
     for (i, source) in warp.iter().enumerate() {
         let (x, y) = (i % width, i / width);
         let measured = inputs.depth_m.get(x, y);
         let sampled = source.map_or(0.0, |n| inputs.compensated_previous_m.as_slice()[n]);
         let compensated = if measured > 0.0 { measured } else { sampled };
-        let delta_z = if source.is_some() {
-            sampled - compensated
-        } else {
-            0.0
-        };
+        let compared = warped_depth[i].unwrap_or(compensated);
+        let delta_z = if source.is_some() { sampled - compared } else { 0.0 };
         let carried_a = source.map_or(0.0, |n| inputs.accumulation_previous_m.as_slice()[n]);
         let carried_p = source.map_or(0, |n| inputs.predicted_previous.as_slice()[n]);
         let mut a = carried_a + delta_z;
-        let config = inputs.config;
         if a <= config.threshold(config.alpha, compensated) {
             a = 0.0;
         }
@@ -239,6 +591,23 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<
         outputs.newly_discovered.set(x, y, u8::from(newly));
         counts.warped += usize::from(source.is_some());
         counts.newly_discovered += usize::from(newly);
+    }
+    // Step 10's input: the object set O₀ = {A > τ_α} and its bounding box.
+    for (i, label) in outputs.object_labels[..size.area()].iter_mut().enumerate() {
+        let (x, y) = (i % width, i / width);
+        let object = outputs.accumulation_m.get(x, y)
+            > config.threshold(config.alpha, outputs.compensated_m.get(x, y));
+        *label = if object { UNLABELLED } else { 0 };
+        if object {
+            counts.object += 1;
+            let pixel = PixelBounds {
+                x0: x,
+                x1: x,
+                y0: y,
+                y1: y,
+            };
+            counts.object_bounds = PixelBounds::union(counts.object_bounds, Some(pixel));
+        }
     }
     counts
 }

@@ -533,6 +533,7 @@ impl FrameProcessor for TestProcessor {
             },
             dvo_iterations: self.count,
             dvo_cost: 0.5,
+            health: occmask::process::FrameHealth::default(),
         })
     }
 }

@@ -567,10 +567,28 @@ fn raw_rows(topic: &str, width: u32, height: u32, step: u32, bpp: usize, len: us
     } else {
         step * (size.height - 1) + row_bytes
     };
-    if len < needed {
+    // The data is `height` rows of `step` bytes; writers that trim the last row's padding are
+    // accepted too. Anything else means width, height, step or encoding disagree with the data
+    // (e.g. 32-bit float depth declared as 16UC1).
+    let full = step * size.height;
+    if len != needed && len != full {
+        let expected = if needed == full {
+            format!("{needed}")
+        } else {
+            format!("{needed} or {full}")
+        };
         return Err(decode_error(
             topic,
-            format!("image {size} with step {step} needs {needed} bytes, found {len}"),
+            format!(
+                "image {size} with step {step} and {bpp} bytes per pixel needs {expected} bytes, found {len} \
+                 (width, height, step or encoding disagree with the data)"
+            ),
+        ));
+    }
+    if size.area() == 0 {
+        return Err(decode_error(
+            topic,
+            format!("expected an image with at least one pixel, found {size}"),
         ));
     }
     Ok(size)

@@ -139,6 +139,7 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
     let images = [MessageType::RawImage, MessageType::CompressedImage];
     let mut colors = Vec::new();
     let mut depths = Vec::new();
+    let mut image_encodings: Vec<String> = Vec::new();
     if overrides.rgb.is_none() || overrides.depth.is_none() {
         for channel in input.channels().values() {
             let Some(ct) = channel.channel_type else { continue };
@@ -149,7 +150,11 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
                 continue;
             };
             // A first message that does not decode is reported when the channel is read.
-            let is_depth = decode_image(ct, &channel.topic, &first.data).is_ok_and(|m| m.is_depth());
+            let decoded = decode_image(ct, &channel.topic, &first.data);
+            let is_depth = decoded.as_ref().is_ok_and(|m| m.is_depth());
+            if let Ok(m) = &decoded {
+                image_encodings.push(format!("{} {}", channel.topic, m.encoding()));
+            }
             if is_depth {
                 depths.push(channel);
             } else {
@@ -178,9 +183,17 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
             "--depth-topic",
         )?
         .ok_or_else(|| {
+            let found = if image_encodings.is_empty() {
+                String::new()
+            } else {
+                format!(" among the image topics ({})", image_encodings.join(", "))
+            };
             no_rgbd(
                 input,
-                "no depth image channel (16UC1, mono16 or 32FC1) found (pass --depth-topic)",
+                &format!(
+                    "no depth image channel (16UC1, mono16 or 32FC1; 8-bit depth is not supported) \
+                     found{found} (pass --depth-topic)"
+                ),
             )
         })?,
     };

@@ -96,6 +96,78 @@ pub enum ExtraRecord {
     },
 }
 
+/// Where an input that ends early (a recorder killed mid-write, a full disk, an interrupted
+/// copy) was cut, found by walking the record framing from the start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct Truncation {
+    /// Bytes from the start of the file to the end of its last complete record: everything in
+    /// them was read.
+    pub intact_bytes: u64,
+    /// Bytes after that (an incomplete record): their messages are lost.
+    pub lost_bytes: u64,
+    /// True when the cut lies after the data section (only the summary, index or footer is
+    /// missing), so no message was lost.
+    pub messages_intact: bool,
+    /// Log-time range (ns) of the messages in the incomplete chunk, when its header survived:
+    /// the messages lost.
+    pub lost_log_time_range: Option<(u64, u64)>,
+}
+
+/// Walks the top-level record framing (opcode, length, body) without reading bodies, and
+/// returns where the last complete record ends, whether the data section was complete, and
+/// the log-time range of an incomplete trailing chunk.
+fn find_truncation(path: &Path, file_len: u64) -> Result<Truncation> {
+    const MAGIC_BYTES: u64 = 8;
+    const PREFIX_BYTES: u64 = 9;
+    // Chunk body: message_start_time, message_end_time (u64 each) come first.
+    const CHUNK_TIMES_BYTES: usize = 16;
+    let mut file = BufReader::with_capacity(64 * 1024, open_file(path)?);
+    let io = |e| Error::io("cannot read MCAP file", path, e);
+    file.seek(SeekFrom::Start(MAGIC_BYTES)).map_err(io)?;
+    let mut pos = MAGIC_BYTES;
+    let mut messages_intact = false;
+    loop {
+        let mut prefix = [0u8; PREFIX_BYTES as usize];
+        if pos + PREFIX_BYTES > file_len {
+            break;
+        }
+        file.read_exact(&mut prefix).map_err(io)?;
+        let opcode = prefix[0];
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&prefix[1..]);
+        let len = u64::from_le_bytes(len);
+        let end = pos.saturating_add(PREFIX_BYTES).saturating_add(len);
+        if end > file_len {
+            let mut lost_log_time_range = None;
+            if opcode == mcap::records::op::CHUNK && len >= CHUNK_TIMES_BYTES as u64 {
+                let mut times = [0u8; CHUNK_TIMES_BYTES];
+                if file.read_exact(&mut times).is_ok() {
+                    let start = u64::from_le_bytes(times[..8].try_into().unwrap_or([0; 8]));
+                    let end = u64::from_le_bytes(times[8..].try_into().unwrap_or([0; 8]));
+                    lost_log_time_range = Some((start, end));
+                }
+            }
+            return Ok(Truncation {
+                intact_bytes: pos,
+                lost_bytes: file_len - pos,
+                messages_intact,
+                lost_log_time_range,
+            });
+        }
+        if opcode == mcap::records::op::DATA_END {
+            messages_intact = true;
+        }
+        file.seek_relative(len as i64).map_err(io)?;
+        pos = end;
+    }
+    Ok(Truncation {
+        intact_bytes: pos,
+        lost_bytes: file_len - pos,
+        messages_intact,
+        lost_log_time_range: None,
+    })
+}
+
 /// Buffer size of the linear reader's file reads.
 const READ_BUFFER_BYTES: usize = 1 << 20;
 
@@ -123,7 +195,7 @@ pub struct McapInput {
     linear_extras: Vec<ExtraRecord>,
     /// First message of each supported channel, collected by the linear scan.
     linear_first: BTreeMap<u16, RawMessage>,
-    truncated: bool,
+    truncation: Option<Truncation>,
     file_len: u64,
 }
 
@@ -135,6 +207,10 @@ fn mcap_error(path: &Path, message: impl Into<String>) -> Error {
 }
 
 fn open_file(path: &Path) -> Result<File> {
+    // Opening a directory succeeds on Unix; reading it then fails with a vaguer message.
+    if path.is_dir() {
+        return Err(mcap_error(path, "expected an MCAP file, found a directory"));
+    }
     File::open(path).map_err(|e| Error::io("cannot open MCAP file", path, e))
 }
 
@@ -272,7 +348,7 @@ impl McapInput {
             channels: BTreeMap::new(),
             linear_extras: Vec::new(),
             linear_first: BTreeMap::new(),
-            truncated: false,
+            truncation: None,
             file_len,
         };
         if let Some(summary) = &input.summary {
@@ -305,7 +381,7 @@ impl McapInput {
         let mut extras = Vec::new();
         let mut first = BTreeMap::new();
         let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
-        self.truncated = linear_records(&path, |record| {
+        let truncated = linear_records(&path, |record| {
             match record {
                 Record::Schema { header, data } => {
                     schemas.insert(
@@ -366,6 +442,9 @@ impl McapInput {
             }
             Ok(())
         })?;
+        if truncated {
+            self.truncation = Some(find_truncation(&path, self.file_len)?);
+        }
         for (id, c) in &mut channels {
             c.message_count = Some(counts.get(id).copied().unwrap_or(0));
         }
@@ -394,7 +473,12 @@ impl McapInput {
     /// True when the file ends before its end magic (an unfinished recording): everything up
     /// to the last complete record is read.
     pub fn is_truncated(&self) -> bool {
-        self.truncated
+        self.truncation.is_some()
+    }
+
+    /// Where a file that ends early was cut and what was lost (`None` for complete files).
+    pub fn truncation(&self) -> Option<&Truncation> {
+        self.truncation.as_ref()
     }
 
     /// True when messages are read through the summary's indexes (log-time order).
@@ -544,16 +628,51 @@ impl McapInput {
             options = options.starting_at(start).ending_before(end);
         }
         let mut reader = IndexedReader::new_with_options(summary, options)?;
+        let crc: SharedCrc = Arc::default();
+        for name in ["zstd", "lz4"] {
+            reader.add_decompressor(CheckedDecompressor {
+                name,
+                crc: Arc::clone(&crc),
+            })?;
+        }
         let mut file = open_file(&self.path)?;
         let mut chunk = Vec::new();
         while let Some(event) = reader.next_event() {
             match event? {
                 IndexedReadEvent::ReadChunkRequest { offset, length } => {
-                    chunk.resize(length, 0);
-                    file.seek(SeekFrom::Start(offset))
+                    // Read the chunk record from its start: its header holds the CRC.
+                    let index = summary
+                        .chunk_indexes
+                        .iter()
+                        .find(|c| c.compressed_data_offset().ok() == Some(offset));
+                    let start = index.map_or(offset, |c| c.chunk_start_offset);
+                    let header_len = (offset - start) as usize;
+                    if offset.saturating_add(length as u64) > self.file_len {
+                        return Err(self.chunk_error(index, "its index points past the end of the file"));
+                    }
+                    chunk.resize(header_len + length, 0);
+                    file.seek(SeekFrom::Start(start))
                         .and_then(|_| file.read_exact(&mut chunk))
                         .map_err(|e| Error::io("cannot read MCAP chunk", &self.path, e))?;
-                    reader.insert_chunk_record_data(offset, &chunk)?;
+                    let (header, data) = chunk.split_at(header_len);
+                    let expected_crc = match index {
+                        Some(index) => {
+                            chunk_header_crc(header).map_err(|m| self.chunk_error(Some(index), &m))?
+                        }
+                        None => 0,
+                    };
+                    if let Ok(mut c) = crc.lock() {
+                        *c = None;
+                    }
+                    reader
+                        .insert_chunk_record_data(offset, data)
+                        .map_err(|e| self.chunk_error(index, &e.to_string()))?;
+                    let found = if index.is_some_and(|i| i.compression.is_empty()) {
+                        Some(crc32fast::hash(data))
+                    } else {
+                        crc.lock().ok().and_then(|c| *c)
+                    };
+                    check_crc(expected_crc, found).map_err(|m| self.chunk_error(index, &m))?;
                 }
                 IndexedReadEvent::Message { header, data } => {
                     let keep_going = f(RawMessage {
@@ -567,6 +686,129 @@ impl McapInput {
             }
         }
         Ok(())
+    }
+}
+
+/// CRC of the last chunk a [`CheckedDecompressor`] decompressed, shared with the reading loop.
+type SharedCrc = Arc<std::sync::Mutex<Option<u32>>>;
+
+/// Decompresses whole zstd or lz4 chunks (the indexed reader hands over a complete chunk and
+/// an output buffer of its declared size) and records the CRC-32 of the output, so the
+/// chunk's CRC is checked for compressed chunks too: a flipped bit that still decompresses
+/// would otherwise go unnoticed.
+struct CheckedDecompressor {
+    name: &'static str,
+    crc: SharedCrc,
+}
+
+impl mcap::sans_io::decompressor::Decompressor for CheckedDecompressor {
+    fn next_read_size(&self) -> usize {
+        0
+    }
+
+    fn decompress(
+        &mut self,
+        src: &[u8],
+        dst: &mut [u8],
+    ) -> mcap::McapResult<mcap::sans_io::decompressor::DecompressResult> {
+        let bad = |e: std::io::Error| mcap::McapError::DecompressionError(format!("{} data: {e}", self.name));
+        let wrote = if self.name == "zstd" {
+            zstd::bulk::Decompressor::new()
+                .and_then(|mut d| d.decompress_to_buffer(src, dst))
+                .map_err(bad)?
+        } else {
+            let mut decoder = lz4::Decoder::new(src).map_err(bad)?;
+            decoder.read_exact(dst).map_err(bad)?;
+            dst.len()
+        };
+        if let Ok(mut crc) = self.crc.lock() {
+            *crc = Some(crc32fast::hash(&dst[..wrote]));
+        }
+        Ok(mcap::sans_io::decompressor::DecompressResult {
+            consumed: src.len(),
+            wrote,
+        })
+    }
+
+    fn reset(&mut self) -> mcap::McapResult<()> {
+        Ok(())
+    }
+
+    fn name(&self) -> &'static str {
+        self.name
+    }
+}
+
+/// Byte offset of the uncompressed-data CRC inside a chunk record: opcode, record length,
+/// message start and end time, uncompressed size.
+const CHUNK_CRC_OFFSET: usize = 1 + 8 + 8 + 8 + 8;
+
+/// Checks a chunk record's header and returns the CRC of its uncompressed data (0 = not
+/// computed, per the MCAP specification).
+fn chunk_header_crc(header: &[u8]) -> std::result::Result<u32, String> {
+    if header.len() < CHUNK_CRC_OFFSET + 4 || header[0] != mcap::records::op::CHUNK {
+        return Err("expected a chunk record at the offset its index gives".into());
+    }
+    let mut crc = [0u8; 4];
+    crc.copy_from_slice(&header[CHUNK_CRC_OFFSET..CHUNK_CRC_OFFSET + 4]);
+    Ok(u32::from_le_bytes(crc))
+}
+
+fn check_crc(expected: u32, found: Option<u32>) -> std::result::Result<(), String> {
+    match found {
+        Some(found) if expected != 0 && found != expected => Err(format!(
+            "CRC mismatch: expected {expected:#010x} from the chunk header, computed {found:#010x} \
+             from its data"
+        )),
+        _ => Ok(()),
+    }
+}
+
+impl McapInput {
+    /// Messages a chunk holds, from its message index records (which follow the chunk, so they
+    /// usually survive damage to it); `None` when they cannot be read.
+    fn chunk_message_count(&self, index: &mcap::records::ChunkIndex) -> Option<u64> {
+        // Message index record: opcode, record length, channel ID (u16), then the byte length of
+        // its (log time, offset) pairs of 16 bytes each.
+        const PREFIX_BYTES: usize = 1 + 8 + 2 + 4;
+        const ENTRY_BYTES: u64 = 16;
+        let mut file = File::open(&self.path).ok()?;
+        let mut total = 0;
+        for offset in index.message_index_offsets.values() {
+            let mut prefix = [0u8; PREFIX_BYTES];
+            file.seek(SeekFrom::Start(*offset)).ok()?;
+            file.read_exact(&mut prefix).ok()?;
+            if prefix[0] != mcap::records::op::MESSAGE_INDEX {
+                return None;
+            }
+            let mut len = [0u8; 4];
+            len.copy_from_slice(&prefix[11..15]);
+            total += u64::from(u32::from_le_bytes(len)) / ENTRY_BYTES;
+        }
+        Some(total)
+    }
+
+    fn chunk_error(&self, index: Option<&mcap::records::ChunkIndex>, what: &str) -> Error {
+        let place = match index {
+            Some(c) => format!(
+                "chunk at byte {}{} (messages logged from {} to {} s, compression {:?})",
+                c.chunk_start_offset,
+                self.chunk_message_count(c)
+                    .map(|n| format!(" holding {n} messages"))
+                    .unwrap_or_default(),
+                crate::time::format_ns_as_seconds(c.message_start_time, 6),
+                crate::time::format_ns_as_seconds(c.message_end_time, 6),
+                c.compression
+            ),
+            None => "a chunk".to_owned(),
+        };
+        mcap_error(
+            &self.path,
+            format!(
+                "damaged {place}: {what}; the other chunks are intact (`mcap recover` copies them to a \
+                 new file)"
+            ),
+        )
     }
 }
 

@@ -1,0 +1,70 @@
+//! Per-stage wall time and process CPU time of the occlusion detector alone, on the synthetic
+//! dominant-object sequence at 640×480 (the frames of `benches/occlusion.rs`). CPU time is the
+//! steadier figure on a shared machine. Run:
+//! `cargo run --release --example detector_profile [-- ROUNDS]` (RAYON_NUM_THREADS=1 for one core).
+
+// A profiling tool: a failing setup is a bug worth a panic.
+#![allow(clippy::unwrap_used)]
+
+use std::time::Instant;
+
+use nalgebra::Isometry3;
+use occmask::image_buf::{DepthMeters, ImageSize};
+use occmask::occlusion::{OcclusionConfig, OcclusionDetector};
+use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
+
+/// Process CPU time (user + system, all threads) in seconds.
+fn cpu_seconds() -> f64 {
+    #[cfg(unix)]
+    {
+        // SAFETY: getrusage writes into the zeroed struct we own.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) };
+        let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+        seconds(usage.ru_utime) + seconds(usage.ru_stime)
+    }
+    #[cfg(not(unix))]
+    {
+        0.0
+    }
+}
+
+fn main() {
+    let rounds: usize = std::env::args().nth(1).map_or(20, |s| s.parse().unwrap());
+    let size = ImageSize::new(640, 480);
+    let config = SequenceConfig {
+        size,
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(Scenario::DominantObject, config);
+    let frames: Vec<(DepthMeters, Isometry3<f64>)> = (40..70)
+        .map(|i| (sequence.frame(i).depth_m, sequence.current_from_previous(i)))
+        .collect();
+    let mut detector = OcclusionDetector::new(size, config.intrinsics(), OcclusionConfig::default()).unwrap();
+    for (depth, motion) in &frames {
+        detector.update(depth, motion).unwrap();
+    }
+    let (mut transport, mut label, mut prune, mut updates) = (0u64, 0u64, 0u64, 0u64);
+    let (cpu0, wall0) = (cpu_seconds(), Instant::now());
+    for _ in 0..rounds {
+        detector.reset();
+        for (depth, motion) in &frames {
+            detector.update(depth, motion).unwrap();
+            let s = detector.stats();
+            transport += s.transport_us;
+            label += s.label_predict_us;
+            prune += s.prune_us;
+        }
+        updates += frames.len() as u64;
+    }
+    let (cpu, wall) = (cpu_seconds() - cpu0, wall0.elapsed().as_secs_f64());
+    let per = |us: u64| us as f64 / 1000.0 / updates as f64;
+    println!(
+        "{updates} updates at {size}: wall {:.2} ms/frame, CPU {:.2} ms/frame; stages (wall): transport {:.2}, label+predict {:.2}, mask+prune {:.2} ms",
+        wall * 1000.0 / updates as f64,
+        cpu * 1000.0 / updates as f64,
+        per(transport),
+        per(label),
+        per(prune)
+    );
+}
