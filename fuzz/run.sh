@@ -24,8 +24,11 @@ for target in "${targets[@]}"; do
     # -timeout: a single input running longer than 10 s is a hang; -malloc_limit_mb: one
     # allocation above 512 MB from a message of a few KB is a finding (the decoders must check
     # declared sizes against the data first).
+    # mcap_file: 4096, see fuzz/known-issues/README.md (an upstream virtual reservation).
+    malloc_limit=512
+    [ "$target" = mcap_file ] && malloc_limit=4096
     nice -n 19 cargo fuzz run -O "$target" -- \
-        -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=512 \
+        -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb="$malloc_limit" \
         -print_final_stats=1 >"fuzz/logs/$target.log" 2>&1 || echo "$target: finding, see fuzz/logs/$target.log"
     grep -E "^stat::number_of_executed_units|^stat::peak_rss_mb|cov: .* ft:" "fuzz/logs/$target.log" | tail -3
 done

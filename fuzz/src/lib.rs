@@ -246,8 +246,8 @@ pub fn text_parsers(data: &[u8]) {
 
 /// A whole MCAP file: written to `scratch`, opened by the process input (`McapInput`, indexed or
 /// linear), channels described and detected, the first message of every supported channel
-/// decoded, a bounded number of messages visited; then the convert/eval reader
-/// (`McapFileReader`) over the same bytes.
+/// decoded and a bounded number of messages visited; then the reader of files occmask wrote
+/// (`McapFileReader`, used by convert/eval round trips) over the same bytes.
 pub fn mcap_file(data: &[u8], scratch: &Path) {
     if std::fs::write(scratch, data).is_err() {
         return;

@@ -7,6 +7,9 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use mcap::records::Record;
+use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
 use crate::error::{Error, Result};
 
 use super::codec::{self, Decoded};
@@ -153,17 +156,90 @@ impl McapFileReader {
     /// Each item is [`Error::Mcap`] for a corrupt record or [`Error::Decode`] for a message
     /// that does not match its schema.
     pub fn messages(&self) -> Result<impl Iterator<Item = Result<ReadMessage>> + '_> {
-        let stream = mcap::MessageStream::new(&self.map)?;
-        Ok(stream.map(|m| {
-            let m = m?;
-            let schema_name = m.channel.schema.as_ref().map(|s| s.name.as_str()).unwrap_or("");
-            let message = codec::decode(schema_name, &m.channel.topic, &m.data)?;
-            Ok(ReadMessage {
-                topic: m.channel.topic.clone(),
-                log_time_ns: m.log_time,
-                sequence: m.sequence,
-                message,
-            })
-        }))
+        // The sans-IO reader with a record-length limit: `mcap::MessageStream` (mcap 0.26)
+        // decompresses chunks without one, and a corrupt record length inside a chunk made it
+        // panic with "capacity overflow" (found by fuzzing, README "Fuzzing").
+        let reader = LinearReader::new_with_options(
+            LinearReaderOptions::default().with_record_length_limit(self.map.len()),
+        );
+        Ok(Messages {
+            data: &self.map,
+            pos: 0,
+            reader,
+            schemas: BTreeMap::new(),
+            channels: BTreeMap::new(),
+            done: false,
+        })
+    }
+}
+
+/// Streaming iterator behind [`McapFileReader::messages`].
+struct Messages<'a> {
+    data: &'a [u8],
+    /// Bytes of `data` already handed to `reader`.
+    pos: usize,
+    reader: LinearReader,
+    /// Schema ID → schema name.
+    schemas: BTreeMap<u16, String>,
+    /// Channel ID → (topic, schema ID).
+    channels: BTreeMap<u16, (String, u16)>,
+    done: bool,
+}
+
+impl Iterator for Messages<'_> {
+    type Item = Result<ReadMessage>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while !self.done {
+            let event = match self.reader.next_event()? {
+                Ok(event) => event,
+                Err(e) => {
+                    self.done = true;
+                    return Some(Err(e.into()));
+                }
+            };
+            let record = match event {
+                LinearReadEvent::ReadRequest(n) => {
+                    let n = n.min(self.data.len() - self.pos);
+                    self.reader
+                        .insert(n)
+                        .copy_from_slice(&self.data[self.pos..self.pos + n]);
+                    self.reader.notify_read(n);
+                    self.pos += n;
+                    continue;
+                }
+                LinearReadEvent::Record { data, opcode } => mcap::parse_record(opcode, data),
+            };
+            let message = match record {
+                Ok(Record::Schema { header, .. }) => {
+                    self.schemas.insert(header.id, header.name);
+                    continue;
+                }
+                Ok(Record::Channel(c)) => {
+                    self.channels.insert(c.id, (c.topic, c.schema_id));
+                    continue;
+                }
+                Ok(Record::Message { header, data }) => {
+                    let Some((topic, schema_id)) = self.channels.get(&header.channel_id) else {
+                        return Some(Err(mcap::McapError::UnknownChannel(
+                            header.sequence,
+                            header.channel_id,
+                        )
+                        .into()));
+                    };
+                    let schema_name = self.schemas.get(schema_id).map_or("", String::as_str);
+                    codec::decode(schema_name, topic, &data).map(|message| ReadMessage {
+                        topic: topic.clone(),
+                        log_time_ns: header.log_time,
+                        sequence: header.sequence,
+                        message,
+                    })
+                }
+                Ok(_) => continue,
+                Err(e) => Err(e.into()),
+            };
+            return Some(message);
+        }
+        None
     }
 }

@@ -383,6 +383,7 @@ fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> R
         .metadata()
         .map_err(|e| Error::io("cannot stat MCAP file", path, e))?
         .len();
+    let mut unread = file_len;
     let mut file = BufReader::with_capacity(READ_BUFFER_BYTES, file);
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default().with_record_length_limit(record_length_limit(file_len)),
@@ -397,9 +398,13 @@ fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> R
         };
         match event {
             LinearReadEvent::ReadRequest(n) => {
+                // The reader zero-fills the `n` bytes it asks for; never more than the file still
+                // holds, so a record declaring a huge length costs nothing and ends as truncation.
+                let n = usize::try_from(unread).map_or(n, |unread| n.min(unread));
                 let read = file
                     .read(reader.insert(n))
                     .map_err(|e| Error::io("cannot read MCAP file", path, e))?;
+                unread = unread.saturating_sub(read as u64);
                 reader.notify_read(read);
             }
             LinearReadEvent::Record { data, opcode } => f(mcap::parse_record(opcode, data)?)?,
