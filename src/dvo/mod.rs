@@ -724,6 +724,10 @@ impl DvoEstimator {
                         estimate.pixels_used = ne.inliers;
                     }
                 }
+                // A coarse level can be degenerate when a moving object leaves only a few
+                // background pixels there (4^l fewer than at full resolution): it is skipped
+                // like a coarse level without enough pixels. Only the finest level decides.
+                Err(LevelError::Degenerate) if !is_finest => continue,
                 Err(LevelError::Degenerate) => {
                     return Ok(failed(estimate, initial, DvoFailure::Degenerate { level: l }));
                 }
