@@ -37,6 +37,8 @@ pub(super) struct Components {
     component: Vec<u32>,
     /// Prediction target (a copy of Ñ from which filled pixels are removed; shared by components).
     target: Vec<u8>,
+    /// The interior pixels of Ñ (where prediction may write), in row-major order.
+    target_pixels: Vec<u32>,
     /// `source_stamp[u] == source_epoch` ⇔ u is in the current component's source set.
     source_stamp: Vec<u32>,
     source_epoch: u32,
@@ -79,6 +81,7 @@ impl Components {
             stack: Vec::with_capacity(n),
             component: Vec::with_capacity(n),
             target: vec![0; n],
+            target_pixels: Vec::with_capacity(n),
             source_stamp: vec![0; n],
             source_epoch: 0,
             candidate_stamp: vec![0; n],
@@ -200,6 +203,22 @@ impl Components {
         }
         if config.predict_newly_discovered {
             self.target.copy_from_slice(newly_discovered.as_slice());
+            self.target_pixels.clear();
+            let (width, height) = (self.width, self.height);
+            // Interior rows and columns only (none in images narrower or lower than 3 px).
+            let interior_rows = if width > 2 {
+                1..height.saturating_sub(1)
+            } else {
+                0..0
+            };
+            for y in interior_rows {
+                let interior = &self.target[y * width + 1..(y + 1) * width - 1];
+                for (x, &t) in (1..).zip(interior) {
+                    if t != 0 {
+                        self.target_pixels.push((y * width + x) as u32);
+                    }
+                }
+            }
         }
         let mut next_id = 0u32;
         // Seeds in row-major order; the set (and so every seed) lies in the bounding box.
@@ -297,15 +316,33 @@ impl Components {
         self.frontier.clear();
         for &p in &self.component {
             self.source_stamp[p as usize] = epoch;
-            self.frontier.push(p);
         }
         let z = depth_m.as_slice();
         let gate = config.prediction_depth_gate_m;
         let mut filled = 0;
+        let mut first_ring = true;
         loop {
             // Candidates: interior target pixels 4-adjacent to the last ring (or the component).
             let ring = next_epoch(&mut self.candidate_epoch, &mut self.candidate_stamp);
             self.candidates.clear();
+            if first_ring {
+                // Same set, found from the other side: the target list is usually far smaller
+                // than the component. Target pixels are interior, so all 4-neighbours exist.
+                first_ring = false;
+                self.frontier.clear();
+                for &t in &self.target_pixels {
+                    let t = t as usize;
+                    let stamp = &self.source_stamp;
+                    let adjacent = stamp[t - 1] == epoch
+                        || stamp[t + 1] == epoch
+                        || stamp[t - width] == epoch
+                        || stamp[t + width] == epoch;
+                    if self.target[t] != 0 && adjacent {
+                        self.candidate_stamp[t] = ring;
+                        self.candidates.push(t as u32);
+                    }
+                }
+            }
             for &f in &self.frontier {
                 let f = f as usize;
                 let (x, y) = (f % width, f / width);

@@ -356,7 +356,15 @@ impl OcclusionDetector {
             return Ok(&self.mask);
         }
         self.frames += 1;
+        // One entry into the thread pool per frame: the parallel passes inside then start from
+        // a worker thread instead of each queueing a job from outside the pool (the pool's
+        // injector queue allocates a block every 63 outside jobs).
+        rayon::scope(|_| self.update_state(depth_m, current_from_previous));
+        Ok(&self.mask)
+    }
 
+    /// Steps 2–13 for every frame after the first.
+    fn update_state(&mut self, depth_m: &DepthMeters, current_from_previous: &Isometry3<f64>) {
         let started = Instant::now();
         let previous_from_current = current_from_previous.inverse();
         let inputs = TransportInputs {
@@ -433,7 +441,6 @@ impl OcclusionDetector {
             self.mask.as_slice().iter().filter(|&&m| m != 0).count()
         );
         self.stats.prune_us = started.elapsed().as_micros() as u64;
-        Ok(&self.mask)
     }
 }
 
