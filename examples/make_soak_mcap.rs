@@ -37,11 +37,18 @@ struct SourceFrame {
 }
 
 fn png_from_depth(raw: &fm::RawImage) -> anyhow::Result<Vec<u8>> {
-    anyhow::ensure!(raw.encoding == "16UC1", "depth encoding {} (expected 16UC1)", raw.encoding);
+    anyhow::ensure!(
+        raw.encoding == "16UC1",
+        "depth encoding {} (expected 16UC1)",
+        raw.encoding
+    );
     let (w, h, step) = (raw.width as usize, raw.height as usize, raw.step as usize);
     let mut pixels = Vec::with_capacity(w * h);
     for y in 0..h {
-        let row = raw.data.get(y * step..y * step + 2 * w).context("short depth image")?;
+        let row = raw
+            .data
+            .get(y * step..y * step + 2 * w)
+            .context("short depth image")?;
         pixels.extend(row.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])));
     }
     let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(raw.width, raw.height, pixels)
@@ -66,9 +73,16 @@ fn main() -> anyhow::Result<()> {
     anyhow::ensure!(args.len() == 4, "usage: make_soak_mcap IN.mcap OUT.mcap FRAMES");
     let total_frames: u64 = args[3].parse()?;
     let input = McapInput::open(std::path::Path::new(&args[1]))?;
-    let (color_topic, depth_topic, calib_topic) =
-        ("/camera/rgb/image", "/camera/depth/image", "/camera/rgb/camera_info");
-    let names = vec![color_topic.to_owned(), depth_topic.to_owned(), calib_topic.to_owned()];
+    let (color_topic, depth_topic, calib_topic) = (
+        "/camera/rgb/image",
+        "/camera/depth/image",
+        "/camera/rgb/camera_info",
+    );
+    let names = vec![
+        color_topic.to_owned(),
+        depth_topic.to_owned(),
+        calib_topic.to_owned(),
+    ];
     let mut streams: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();
     input.for_each_message(Some(&names), None, |m| {
         let topic = input.channels()[&m.header.channel_id].topic.clone();
@@ -80,19 +94,28 @@ fn main() -> anyhow::Result<()> {
         .map(|t| streams.get(t).map_or(0, Vec::len))
         .min()
         .unwrap_or(0);
-    anyhow::ensure!(count >= 2, "need colour, depth and calibration messages in {}", args[1]);
+    anyhow::ensure!(
+        count >= 2,
+        "need colour, depth and calibration messages in {}",
+        args[1]
+    );
     let mut frames = Vec::with_capacity(count);
-    for k in 0..count {
-        let color = fm::CompressedImage::decode(streams[color_topic][k].as_slice())
+    let sources = streams[color_topic]
+        .iter()
+        .zip(&streams[depth_topic])
+        .zip(&streams[calib_topic])
+        .take(count);
+    for ((color, depth), calibration) in sources {
+        let color = fm::CompressedImage::decode(color.as_slice())
             .context("colour must be a foxglove.CompressedImage (as `occmask convert tum` writes it)")?;
-        let depth = fm::RawImage::decode(streams[depth_topic][k].as_slice())
-            .context("depth must be a foxglove.RawImage 16UC1")?;
+        let depth =
+            fm::RawImage::decode(depth.as_slice()).context("depth must be a foxglove.RawImage 16UC1")?;
         frames.push(SourceFrame {
             color_jpeg: jpeg_from_color(&color.data, &color.format)?,
             color_frame_id: color.frame_id,
             depth_png: png_from_depth(&depth)?,
             depth_frame_id: depth.frame_id,
-            calibration: streams[calib_topic][k].clone(),
+            calibration: calibration.clone(),
         });
     }
 
@@ -120,14 +143,21 @@ fn main() -> anyhow::Result<()> {
         } else {
             image_schema
         };
-        ids.insert(c.topic.clone(), w.add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)?);
+        ids.insert(
+            c.topic.clone(),
+            w.add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)?,
+        );
     }
     let t0 = 1_600_000_000_000_000_000u64;
     let period = 2 * (frames.len() - 1);
     let mut written = 0u64;
     for k in 0..total_frames {
         let phase = k as usize % period;
-        let f = &frames[if phase < frames.len() { phase } else { period - phase }];
+        let f = &frames[if phase < frames.len() {
+            phase
+        } else {
+            period - phase
+        }];
         let t = t0 + k * FRAME_NS;
         let stamp = Some(occmask::mcap_io::codec::timestamp(t));
         let color = fm::CompressedImage {
@@ -147,7 +177,11 @@ fn main() -> anyhow::Result<()> {
         let mut calibration = fm::CameraCalibration::decode(f.calibration.as_slice())?;
         calibration.timestamp = stamp;
         let calibration = calibration.encode_to_vec();
-        for (topic, bytes) in [(color_topic, &color), (calib_topic, &calibration), (depth_topic, &depth)] {
+        for (topic, bytes) in [
+            (color_topic, &color),
+            (calib_topic, &calibration),
+            (depth_topic, &depth),
+        ] {
             w.write_to_known_channel(
                 &mcap::records::MessageHeader {
                     channel_id: ids[topic],

@@ -23,6 +23,12 @@ INTERVAL=${INTERVAL:-5}
 NICE=${NICE:-19}
 OUT=bench-out/soak
 mkdir -p "$OUT"
+cleanup() {
+  if [ "${KEEP:-0}" != 1 ]; then
+    rm -f "$OUT/soak.mcap" "$OUT/soak.out.mcap"
+  fi
+}
+trap cleanup EXIT
 cargo build --release --quiet --bin occmask --example make_soak_mcap
 BIN=target/release/occmask
 
@@ -56,7 +62,9 @@ while [ -n "$PID" ] && kill -0 "$PID" 2>/dev/null; do
     "$(cut -d' ' -f1 /proc/loadavg)" "$CPU" >> "$OUT/soak.rss.tsv"
   sleep "$INTERVAL"
 done
-wait "$TIME_PID"
+# Interrupting the process (kill -INT <occmask pid>) still prints the summary of the samples.
+STATUS=0
+wait "$TIME_PID" || STATUS=$?
 END=$(date +%s.%N)
 WALL=$(echo "$END - $START" | bc)
 echo "== summary"
@@ -64,8 +72,9 @@ awk -F'\t' 'NR > 1 && $1 <= 60 { rss = $2; hwm = $3 } NR > 1 { last_rss = $2; la
   END { printf "RSS at ~1 min: %d KB (peak so far %d KB); at the end: %d KB (peak %d KB); mean load %.1f over %d samples\n",
         rss, hwm, last_rss, last_hwm, load / n, n }' "$OUT/soak.rss.tsv"
 grep -E "Maximum resident|Elapsed|User time|System time" "$OUT/soak.time.txt"
-echo "frames $FRAMES, wall $WALL s, $(echo "scale=1; $FRAMES / $WALL" | bc) frames/s"
-ls -l "$OUT/soak.out.mcap"
-if [ "${KEEP:-0}" != 1 ]; then
-  rm -f "$OUT/soak.mcap" "$OUT/soak.out.mcap"
+if [ "$STATUS" = 0 ]; then
+  echo "frames $FRAMES, wall $WALL s, $(echo "scale=1; $FRAMES / $WALL" | bc) frames/s"
+  ls -l "$OUT/soak.out.mcap"
+else
+  echo "process exited with status $STATUS after $WALL s (interrupted: see its message for the items done)"
 fi
