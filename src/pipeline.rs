@@ -83,7 +83,7 @@ use nalgebra::Isometry3;
 
 use crate::dvo::{DvoConfig, DvoFailure, DvoStatus, DvoTracker, MAX_DVO_LEVELS};
 use crate::error::{Error, Result};
-use crate::geometry::se3::rotation_angle_rad;
+use crate::geometry::se3::{is_finite_pose, rotation_angle_rad};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use crate::occlusion::{OcclusionConfig, OcclusionDetector, OcclusionStats};
@@ -343,6 +343,16 @@ impl PoseOutcome {
         )
     }
 
+    /// Whether the outcome says the frame does not match its reference view (a rejected
+    /// motion, or DVO's [`DvoFailure::PoorFit`]): a jump, after which the detector's
+    /// accumulation no longer describes the scene and is reset.
+    pub fn views_disagree(&self) -> bool {
+        matches!(
+            self,
+            PoseOutcome::Rejected(_) | PoseOutcome::DvoFailed(DvoFailure::PoorFit { .. })
+        )
+    }
+
     /// A short stable name for logs and `/occmask/stats` (`converged`, `first_frame`,
     /// `external`, `failed_degenerate`, `failed_too_few_pixels`, `failed_non_finite`, `failed_poor_fit`,
     /// `rejected_non_finite`, `rejected_too_fast`, `rejected_too_fast_rotation`,
@@ -492,11 +502,6 @@ fn gray_range(gray: &GrayF32) -> f32 {
             (lo.min(g), hi.max(g))
         });
     (hi - lo).max(0.0)
-}
-
-fn is_finite_pose(pose: &Isometry3<f64>) -> bool {
-    pose.translation.vector.iter().all(|v| v.is_finite())
-        && pose.rotation.coords.iter().all(|v| v.is_finite())
 }
 
 impl Processor {
@@ -754,12 +759,9 @@ impl Processor {
                             // rejected estimate or a poor fit (the views do not match: a
                             // jump), a failure after a blackout, or a failure run long
                             // enough to hold the pose discards it.
-                            let rejected = matches!(
-                                stats.outcome,
-                                PoseOutcome::Rejected(_) | PoseOutcome::DvoFailed(DvoFailure::PoorFit { .. })
-                            );
-                            keep_detector =
-                                !rejected && !detector_after_gap && fallback != PoseFallback::Hold;
+                            keep_detector = !stats.outcome.views_disagree()
+                                && !detector_after_gap
+                                && fallback != PoseFallback::Hold;
                         }
                     }
                 }

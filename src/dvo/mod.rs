@@ -41,6 +41,7 @@ pub mod weights;
 use nalgebra::Isometry3;
 
 use crate::error::{Error, Result};
+use crate::geometry::se3::is_finite_pose;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use crate::pyramid::{level_size, ImagePyramid, TargetSample};
@@ -640,9 +641,7 @@ impl DvoEstimator {
         let initial = initial_current_from_reference
             .copied()
             .unwrap_or_else(Isometry3::identity);
-        let finite = initial.translation.vector.iter().all(|v| v.is_finite())
-            && initial.rotation.coords.iter().all(|v| v.is_finite());
-        if !finite {
+        if !is_finite_pose(&initial) {
             return Err(Error::InvalidParameter {
                 name: "initial_current_from_reference",
                 value: format!("{initial:?}"),
@@ -736,9 +735,7 @@ impl DvoEstimator {
                 }
             }
         }
-        let finite = pose.translation.vector.iter().all(|v| v.is_finite())
-            && pose.rotation.coords.iter().all(|v| v.is_finite());
-        if !finite {
+        if !is_finite_pose(&pose) {
             return Ok(failed(
                 estimate,
                 initial,

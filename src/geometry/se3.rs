@@ -65,6 +65,12 @@ pub fn se3_log(transform: &Isometry3<f64>) -> Twist {
     Twist::new(v.x, v.y, v.z, omega.x, omega.y, omega.z)
 }
 
+/// Whether every translation and quaternion component of `transform` is finite.
+pub fn is_finite_pose(transform: &Isometry3<f64>) -> bool {
+    transform.translation.vector.iter().all(|v| v.is_finite())
+        && transform.rotation.coords.iter().all(|v| v.is_finite())
+}
+
 /// Rotation angle of a transform in radians, in [0, π].
 pub fn rotation_angle_rad(transform: &Isometry3<f64>) -> f64 {
     transform.rotation.angle()
