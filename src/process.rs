@@ -6,8 +6,10 @@
 //! most [`PREFETCH_MESSAGES`] ahead, so decoding overlaps with the pipeline), at most
 //! [`MAX_QUEUED_IMAGES`] colour and depth images wait for a partner, and input messages wait
 //! only until no new message can be written before them (new messages take the colour message's log time, so the output stays in
-//! log-time order). Only the estimated trajectory (64 bytes per frame) and external poses
-//! (`--pose-topic`) are kept whole.
+//! log-time order). The estimated trajectory is not kept: each pose goes to
+//! [`ProcessHooks::frame_done`]. What does grow with the file is what the MCAP format puts in
+//! the summary (one chunk index per output chunk, written at the end) and, with
+//! `--pose-topic`, the external pose stream, which is read whole before the first frame.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{Seek, Write};
@@ -224,8 +226,10 @@ pub struct ProcessReport {
     /// going backwards or duplicated): skipped, since odometry and the detector need time
     /// order.
     pub out_of_order_frames: u64,
-    /// The estimated trajectory (colour stamps).
-    pub trajectory: Vec<StampedPose>,
+    /// Colour stamp of the last processed frame (frames must come after it). The trajectory
+    /// itself is not kept, so memory stays flat however long the input is: it goes to
+    /// [`ProcessHooks::frame_done`] frame by frame (e.g. `--export-trajectory` streams it).
+    pub last_timestamp_ns: Option<u64>,
 }
 
 /// Callbacks during [`process_file`].
@@ -235,11 +239,12 @@ pub trait ProcessHooks {
     fn messages_read(&mut self, _count: u64) -> std::ops::ControlFlow<()> {
         std::ops::ControlFlow::Continue(())
     }
-    /// Called after each processed frame with its stamp and mask (e.g. `--export-masks`).
+    /// Called after each processed frame with its estimated pose (colour stamp) and mask
+    /// (e.g. `--export-trajectory`, `--export-masks`).
     ///
     /// # Errors
     /// Stops processing with this error.
-    fn frame_done(&mut self, _timestamp_ns: u64, _mask: &Mask) -> Result<()> {
+    fn frame_done(&mut self, _pose: &StampedPose, _mask: &Mask) -> Result<()> {
         Ok(())
     }
 }
@@ -584,7 +589,7 @@ pub fn process_file<W: Write + Seek>(
             input_truncated: input.is_truncated(),
             input_truncation: input.truncation().copied(),
             out_of_order_frames: 0,
-            trajectory: Vec::new(),
+            last_timestamp_ns: None,
         },
     };
     let ctx = FrameContext {
@@ -761,12 +766,7 @@ impl FrameLoop {
             self.report.outside_time_range += 1;
             return Ok(());
         }
-        if self
-            .report
-            .trajectory
-            .last()
-            .is_some_and(|p| stamp <= p.timestamp_ns)
-        {
+        if self.report.last_timestamp_ns.is_some_and(|last| stamp <= last) {
             self.report.out_of_order_frames += 1;
             return Ok(());
         }
@@ -873,12 +873,13 @@ impl FrameLoop {
             accumulation: result.accumulation.as_ref(),
             stats: &stats,
         })?;
-        hooks.frame_done(stamp, &result.mask)?;
-        self.report.frames += 1;
-        self.report.trajectory.push(StampedPose {
+        let pose = StampedPose {
             timestamp_ns: stamp,
             world_from_camera: result.world_from_camera,
-        });
+        };
+        hooks.frame_done(&pose, &result.mask)?;
+        self.report.frames += 1;
+        self.report.last_timestamp_ns = Some(stamp);
         Ok(())
     }
 }

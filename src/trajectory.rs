@@ -47,9 +47,12 @@ pub fn tum_line(pose: &StampedPose) -> String {
     )
 }
 
-/// A whole TUM trajectory file: a header comment, then one [`tum_line`] per pose.
+/// The comment line that starts a TUM trajectory file.
+pub const TUM_HEADER: &str = "# timestamp tx ty tz qx qy qz qw";
+
+/// A TUM trajectory file's text: [`TUM_HEADER`], then one [`tum_line`] per pose.
 pub fn to_tum_text(poses: &[StampedPose]) -> String {
-    let mut out = String::from("# timestamp tx ty tz qx qy qz qw\n");
+    let mut out = format!("{TUM_HEADER}\n");
     for p in poses {
         out.push_str(&tum_line(p));
         out.push('\n');

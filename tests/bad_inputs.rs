@@ -1062,10 +1062,21 @@ fn interrupted_runs_leave_nothing_and_rerun_identically() {
         "convert re-run differs"
     );
 
-    // process: the first second of the recording (30 frames) keeps this quick.
+    // process: the first second of the recording (30 frames) keeps this quick. The trajectory
+    // export is streamed while frames finish, so its temporary file must go too.
     let input = tmp.path().join("desk.mcap");
     std::fs::write(&input, &desk_mcap).unwrap();
-    let process = os(&[&"process", &input, &"-o", &"out.mcap", &"--end", &"1", &"-q"]);
+    let process = os(&[
+        &"process",
+        &input,
+        &"-o",
+        &"out.mcap",
+        &"--export-trajectory",
+        &"traj.txt",
+        &"--end",
+        &"1",
+        &"-q",
+    ]);
     let out = occmask_in(&process, &reference);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     for (name, signal) in [
@@ -1081,6 +1092,13 @@ fn interrupted_runs_leave_nothing_and_rerun_identically() {
     assert!(
         std::fs::read(work.join("out.mcap")).unwrap() == std::fs::read(reference.join("out.mcap")).unwrap(),
         "process re-run differs"
+    );
+    let trajectory = std::fs::read_to_string(work.join("traj.txt")).unwrap();
+    // A header and one pose per frame of the first second (TUM stamps are not exactly 30 Hz).
+    assert!((29..=33).contains(&trajectory.lines().count()), "{trajectory}");
+    assert!(
+        trajectory == std::fs::read_to_string(reference.join("traj.txt")).unwrap(),
+        "trajectory re-run differs"
     );
 }
 

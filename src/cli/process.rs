@@ -26,7 +26,7 @@ use occmask::process::{
     DEFAULT_PAIR_TOLERANCE_NS,
 };
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
-use occmask::trajectory::to_tum_text;
+use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
 
 use super::convert::CompressionArg;
 use super::{Globals, Outcome};
@@ -289,12 +289,49 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
     })
 }
 
-/// Progress and `--export-masks`.
+/// Progress, `--export-trajectory` (streamed: the trajectory is never held in memory) and
+/// `--export-masks`.
 struct Hooks<'a> {
     bar: &'a ProgressBar,
     total: &'a ProgressBar,
     reported: u64,
     masks_dir: Option<&'a Path>,
+    trajectory: Option<TrajectoryExport>,
+}
+
+/// `--export-trajectory`: TUM lines written as frames finish, to a temporary file that is
+/// renamed into place only when the whole input succeeded.
+struct TrajectoryExport {
+    path: PathBuf,
+    output: AtomicOutput,
+    file: BufWriter<std::fs::File>,
+}
+
+impl TrajectoryExport {
+    fn create(path: &Path, force: bool, inputs: &[&Path]) -> anyhow::Result<Self> {
+        let (output, file) = AtomicOutput::create(path, force, inputs)?;
+        let mut export = Self {
+            path: path.to_path_buf(),
+            output,
+            file: BufWriter::new(file),
+        };
+        export.write_line(TUM_HEADER)?;
+        Ok(export)
+    }
+
+    fn write_line(&mut self, line: &str) -> occmask::Result<()> {
+        writeln!(self.file, "{line}")
+            .map_err(|e| occmask::Error::io("cannot write --export-trajectory", &self.path, e))
+    }
+
+    fn commit(self) -> anyhow::Result<()> {
+        let file = self
+            .file
+            .into_inner()
+            .map_err(|e| anyhow!("cannot write {}: {}", self.path.display(), e.error()))?;
+        self.output.commit(file)?;
+        Ok(())
+    }
 }
 
 /// Progress is drawn every this many messages: cheap, and still smooth at 100 messages/s.
@@ -314,11 +351,14 @@ impl ProcessHooks for Hooks<'_> {
         }
     }
 
-    fn frame_done(&mut self, timestamp_ns: u64, mask: &Mask) -> occmask::Result<()> {
+    fn frame_done(&mut self, pose: &StampedPose, mask: &Mask) -> occmask::Result<()> {
+        if let Some(export) = &mut self.trajectory {
+            export.write_line(&tum_line(pose))?;
+        }
         let Some(dir) = self.masks_dir else {
             return Ok(());
         };
-        let path = dir.join(format!("{}.png", format_ns_as_seconds(timestamp_ns, 6)));
+        let path = dir.join(format!("{}.png", format_ns_as_seconds(pose.timestamp_ns, 6)));
         let img = image::GrayImage::from_raw(
             mask.width() as u32,
             mask.height() as u32,
@@ -350,11 +390,16 @@ fn run_one(
         bar.set_length(n);
     }
     let (output, file) = AtomicOutput::create(&job.output, args.force, all_inputs)?;
+    let trajectory = match &args.export_trajectory {
+        Some(path) => Some(TrajectoryExport::create(path, args.force, all_inputs)?),
+        None => None,
+    };
     let mut hooks = Hooks {
         bar,
         total,
         reported: 0,
         masks_dir: args.export_masks.as_deref(),
+        trajectory,
     };
     if let Some(dir) = &args.export_masks {
         std::fs::create_dir_all(dir)
@@ -386,11 +431,8 @@ fn run_one(
         );
     }
     output.commit(file)?;
-    if let Some(path) = &args.export_trajectory {
-        let (out, mut f) = AtomicOutput::create(path, args.force, all_inputs)?;
-        f.write_all(to_tum_text(&report.trajectory).as_bytes())
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        out.commit(f)?;
+    if let Some(export) = hooks.trajectory {
+        export.commit()?;
     }
     bar.set_position(bar.length().unwrap_or(0));
     Ok(report)
