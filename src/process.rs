@@ -1,11 +1,19 @@
 //! `occmask process` for one file: read an RGB-D MCAP, pair colour with depth, run a
 //! [`FrameProcessor`] per pair, and write the annotated copy or sidecar.
 //!
+//! Three threads per file, so the pipeline (DVO + detector, itself row-parallel on rayon) is
+//! the only serial part: a prefetch thread reads, decompresses and decodes the images; the
+//! frame loop (the calling thread) pairs colour with depth and runs the pipeline; a writer
+//! thread encodes the new messages (mask, outlines, poses, stats), copies the input messages
+//! and compresses the chunks. The writer makes the same calls in the same order as one
+//! thread would, so the output bytes do not depend on thread timing. [`LoopTimings`] in the
+//! report says where the frame loop waited.
+//!
 //! Memory is bounded whatever the file length: messages stream through (indexed, log-time
-//! order when the file has a summary) from a prefetch thread that also decodes the images (at
-//! most [`PREFETCH_MESSAGES`] ahead, so decoding overlaps with the pipeline), at most
-//! [`MAX_QUEUED_IMAGES`] colour and depth images wait for a partner, and input messages wait
-//! only until no new message can be written before them (new messages take the colour message's log time, so the output stays in
+//! order when the file has a summary) with at most [`PREFETCH_BYTES`] read ahead and
+//! [`WRITE_QUEUE_BYTES`] queued for writing, at most [`MAX_QUEUED_IMAGES`] colour and depth
+//! images wait for a partner, and input messages wait only until no new message can be written
+//! before them (new messages take the colour message's log time, so the output stays in
 //! log-time order). The estimated trajectory is not kept: each pose goes to
 //! [`ProcessHooks::frame_done`]. What does grow with the file is what the MCAP format puts in
 //! the summary (one chunk index per output chunk, written at the end) and, with
@@ -35,6 +43,9 @@ use crate::mcap_io::DEPTH_UNITS_KEY;
 use crate::pipeline::{FrameInput, PoseFallback, PoseSource, Processor, ProcessorConfig};
 use crate::time::split_ns;
 use crate::trajectory::{interpolate, StampedPose};
+
+mod queue;
+use queue::{byte_queue, ByteReceiver, ByteSender};
 
 /// Where camera poses come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -230,6 +241,27 @@ pub struct ProcessReport {
     /// itself is not kept, so memory stays flat however long the input is: it goes to
     /// [`ProcessHooks::frame_done`] frame by frame (e.g. `--export-trajectory` streams it).
     pub last_timestamp_ns: Option<u64>,
+    /// Where the frame loop's wall-clock time went (never written to the output, so the
+    /// output bytes stay deterministic).
+    pub timings: LoopTimings,
+}
+
+/// Where the frame loop's wall-clock time went, in seconds. The frame loop runs the pipeline;
+/// a prefetch thread reads and decodes the input and a writer thread encodes, copies and
+/// compresses the output, so `pipeline_s` close to `loop_s` means the pipeline is the only
+/// serial part.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct LoopTimings {
+    /// From the start of reading to the last frame queued for writing.
+    pub loop_s: f64,
+    /// In the pipeline ([`FrameProcessor::process`]: DVO + detector).
+    pub pipeline_s: f64,
+    /// Waiting for the prefetch thread (reading, decompression, image decoding).
+    pub input_wait_s: f64,
+    /// Waiting for room in the writer thread's queue (encoding, compression, disk).
+    pub output_wait_s: f64,
+    /// The writer thread finishing what was queued after the loop ended.
+    pub writer_tail_s: f64,
 }
 
 /// Callbacks during [`process_file`].
@@ -283,14 +315,131 @@ struct Prefetched {
     image: Option<(bool, Queued)>,
 }
 
-/// Messages the prefetch thread may read ahead of processing: enough to decode the next frame
-/// while the current one is processed, few enough to keep memory small (images are decoded).
-pub const PREFETCH_MESSAGES: usize = 8;
+/// Bytes (messages plus decoded pixels) the prefetch thread may read ahead of processing:
+/// about four VGA frames (1.5 MB of messages and 2.5 MB of decoded grey and depth each), so the
+/// next frame is decoded while the current one is processed even with many small messages
+/// (pose streams) between images, while memory stays flat. (It was 8 messages: less than one
+/// TUM frame, whose 100 Hz motion capture puts ~36 messages between images, so decoding
+/// stalled until the pipeline had finished the frame before.)
+pub const PREFETCH_BYTES: usize = 16 << 20;
+/// Messages the prefetch thread may read ahead, whatever their size.
+pub const PREFETCH_MAX_MESSAGES: usize = 4096;
+
+/// Bytes (copied messages, masks) the frame loop may queue ahead of the writer thread: a few
+/// frames, so a chunk flush does not stall the pipeline.
+pub const WRITE_QUEUE_BYTES: usize = 16 << 20;
+/// Output operations queued ahead of the writer thread, whatever their size.
+pub const WRITE_QUEUE_MAX_OPS: usize = 4096;
+
+/// What the frame loop hands to the writer thread, in output order.
+enum WriteOp {
+    /// An input message, copied unchanged (annotated copy).
+    Copy(RawMessage),
+    /// One processed frame's new messages.
+    Frame(Box<FrameWrite>),
+}
+
+/// Owned [`FrameAnnotation`]: everything the writer thread needs to encode one frame.
+struct FrameWrite {
+    log_time_ns: u64,
+    timestamp_ns: u64,
+    frame_id: String,
+    mask: Mask,
+    world_from_camera: Isometry3<f64>,
+    accumulation: Option<Image<f32>>,
+    stats: FrameStatsMsg,
+}
+
+impl WriteOp {
+    /// What the op holds in memory, for the queue's budget.
+    fn bytes(&self) -> usize {
+        match self {
+            WriteOp::Copy(m) => m.data.len(),
+            WriteOp::Frame(f) => {
+                f.mask.as_slice().len()
+                    + f.accumulation
+                        .as_ref()
+                        .map_or(0, |a| std::mem::size_of_val(a.as_slice()))
+            }
+        }
+    }
+}
+
+/// The frame loop's end of the writer thread's queue.
+struct OutputQueue {
+    ops: ByteSender<WriteOp>,
+    /// Time spent waiting for room in the queue.
+    waited: std::cell::Cell<std::time::Duration>,
+}
+
+impl OutputQueue {
+    /// Queues `op`. Fails only when the writer thread has stopped on an error, which
+    /// [`process_file`] then reports instead of this placeholder.
+    fn send(&self, op: WriteOp) -> Result<()> {
+        let wait_start = Instant::now();
+        let bytes = op.bytes();
+        let sent = self.ops.send(op, bytes);
+        self.waited.set(self.waited.get() + wait_start.elapsed());
+        sent.map_err(|_| Error::Decode {
+            topic: String::new(),
+            message: "the output writer stopped".into(),
+        })
+    }
+}
+
+/// The writer thread: encodes the new messages (mask, contours, poses, path, stats),
+/// copies input messages and compresses chunks, in queue order, so the frame loop only runs
+/// the pipeline. Same calls in the same order as on one thread: the output bytes do not
+/// change.
+fn write_ops<W: Write + Seek>(
+    mut writer: AnnotatedWriter<W>,
+    ops: ByteReceiver<WriteOp>,
+) -> Result<AnnotatedWriter<W>> {
+    for op in ops {
+        match op {
+            WriteOp::Copy(m) => writer.copy_message(&m.header, &m.data)?,
+            WriteOp::Frame(f) => writer.write_frame(&FrameAnnotation {
+                log_time_ns: f.log_time_ns,
+                timestamp_ns: f.timestamp_ns,
+                frame_id: &f.frame_id,
+                mask: &f.mask,
+                world_from_camera: &f.world_from_camera,
+                accumulation: f.accumulation.as_ref(),
+                stats: &f.stats,
+            })?,
+        }
+    }
+    Ok(writer)
+}
 
 enum Pairing {
     Pair(Box<(Queued, Queued)>),
     UnpairedColor,
     UnpairedDepth,
+}
+
+impl Prefetched {
+    /// What the item holds in memory, for the prefetch queue's budget.
+    fn bytes(&self) -> usize {
+        let pixels = match &self.image {
+            Some((
+                _,
+                Queued {
+                    pixels: Pixels::Gray(g),
+                    ..
+                },
+            )) => std::mem::size_of_val(g.as_slice()),
+            Some((
+                _,
+                Queued {
+                    pixels: Pixels::Depth(d),
+                    ..
+                },
+            )) => std::mem::size_of_val(d.as_slice()),
+            None => 0,
+        };
+        self.message.data.len() + pixels
+    }
 }
 
 /// Greedy nearest-stamp pairing over two streams in time order.
@@ -458,7 +607,7 @@ fn load_external_poses(
 /// [`Error::Dataset`] for missing channels or calibration (naming the flag that fixes it);
 /// [`Error::Decode`] for undecodable or unsupported messages; [`Error::SizeMismatch`] when
 /// colour and depth (or the calibration) differ in size; I/O and MCAP errors.
-pub fn process_file<W: Write + Seek>(
+pub fn process_file<W: Write + Seek + Send>(
     input: &McapInput,
     sink: W,
     config: &ProcessConfig,
@@ -590,6 +739,7 @@ pub fn process_file<W: Write + Seek>(
             input_truncation: input.truncation().copied(),
             out_of_order_frames: 0,
             last_timestamp_ns: None,
+            timings: LoopTimings::default(),
         },
     };
     let ctx = FrameContext {
@@ -643,51 +793,85 @@ pub fn process_file<W: Write + Seek>(
             },
         )))
     };
-    std::thread::scope(|scope| -> Result<()> {
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Prefetched>>(PREFETCH_MESSAGES);
+    let loop_start = Instant::now();
+    let mut output_wait = std::time::Duration::ZERO;
+    let (mut loop_s, mut writer_tail_s) = (0.0, 0.0);
+    let (loop_result, writer_result) = std::thread::scope(|scope| {
+        let (write_tx, write_rx) = byte_queue::<WriteOp>(WRITE_QUEUE_BYTES, WRITE_QUEUE_MAX_OPS);
+        let writer_thread = scope.spawn(move || write_ops(writer, write_rx));
+        let output = OutputQueue {
+            ops: write_tx,
+            waited: std::cell::Cell::new(std::time::Duration::ZERO),
+        };
+        let (tx, rx) = byte_queue::<Result<Prefetched>>(PREFETCH_BYTES, PREFETCH_MAX_MESSAGES);
         let read_topics = read_topics.as_deref();
         let decode = &decode;
         scope.spawn(move || {
             let result = input.for_each_message(read_topics, None, |message| {
                 let item = decode(&message, &pool_rx).map(|image| Prefetched { message, image });
+                let bytes = item.as_ref().map_or(0, Prefetched::bytes);
                 let failed = item.is_err();
                 // A closed channel means the consumer stopped (error or Ctrl-C): stop reading.
-                Ok(tx.send(item).is_ok() && !failed)
+                Ok(tx.send(item, bytes).is_ok() && !failed)
             });
             if let Err(e) = result {
-                let _ = tx.send(Err(e));
+                let _ = tx.send(Err(e), 0);
             }
         });
-        let mut read = 0u64;
-        for item in rx {
-            let Prefetched { message, image } = item?;
-            read += 1;
-            if hooks.messages_read(read).is_break() {
-                return Err(Error::Interrupted {
-                    done: read as usize,
-                    total: input.message_count().unwrap_or(read) as usize,
-                });
-            }
-            match image {
-                Some((true, queued)) => {
-                    state.report.color_messages += 1;
-                    state.first_color_ns.get_or_insert(queued.timestamp_ns);
-                    state.pairer.color.push_back(queued);
+        let frame_loop = || -> Result<()> {
+            let mut read = 0u64;
+            // `rx` moves into the loop and is dropped on any early return, which stops the
+            // prefetch thread.
+            let mut rx = rx;
+            loop {
+                let wait_start = Instant::now();
+                let Some(item) = rx.next() else { break };
+                state.report.timings.input_wait_s += wait_start.elapsed().as_secs_f64();
+                let Prefetched { message, image } = item?;
+                read += 1;
+                if hooks.messages_read(read).is_break() {
+                    return Err(Error::Interrupted {
+                        done: read as usize,
+                        total: input.message_count().unwrap_or(read) as usize,
+                    });
                 }
-                Some((false, queued)) => {
-                    state.report.depth_messages += 1;
-                    state.pairer.depth.push_back(queued);
+                match image {
+                    Some((true, queued)) => {
+                        state.report.color_messages += 1;
+                        state.first_color_ns.get_or_insert(queued.timestamp_ns);
+                        state.pairer.color.push_back(queued);
+                    }
+                    Some((false, queued)) => {
+                        state.report.depth_messages += 1;
+                        state.pairer.depth.push_back(queued);
+                    }
+                    None => {}
                 }
-                None => {}
+                if copy {
+                    state.pending.push_back(message);
+                }
+                state.drain(&ctx, &output, make_processor, hooks, false)?;
             }
-            if copy {
-                state.pending.push_back(message);
-            }
-            state.drain(&ctx, &mut writer, make_processor, hooks, false)?;
-        }
-        Ok(())
-    })?;
-    state.drain(&ctx, &mut writer, make_processor, hooks, true)?;
+            state.drain(&ctx, &output, make_processor, hooks, true)
+        };
+        let loop_result = frame_loop();
+        loop_s = loop_start.elapsed().as_secs_f64();
+        output_wait = output.waited.get();
+        // Closing the queue ends the writer thread once it has written everything queued.
+        drop(output);
+        let writer_result = writer_thread
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        writer_tail_s = loop_start.elapsed().as_secs_f64() - loop_s;
+        (loop_result, writer_result)
+    });
+    // A writer error (e.g. a full disk) is the cause when both failed: the frame loop only
+    // saw the closed queue.
+    let writer = writer_result?;
+    loop_result?;
+    state.report.timings.output_wait_s = output_wait.as_secs_f64();
+    state.report.timings.loop_s = loop_s;
+    state.report.timings.writer_tail_s = writer_tail_s;
     state.report.copied_messages = writer.copied_messages();
     state.report.new_messages = writer.new_messages();
     let sink = writer.finish()?;
@@ -718,10 +902,10 @@ struct FrameLoop {
 impl FrameLoop {
     /// Pairs what can be paired, processes the pairs, and copies input messages that can no
     /// longer have new messages written before them.
-    fn drain<W: Write + Seek>(
+    fn drain(
         &mut self,
         ctx: &FrameContext<'_>,
-        writer: &mut AnnotatedWriter<W>,
+        output: &OutputQueue,
         make_processor: &mut ProcessorFactory<'_>,
         hooks: &mut dyn ProcessHooks,
         end_of_stream: bool,
@@ -732,7 +916,7 @@ impl FrameLoop {
                 Pairing::UnpairedDepth => self.report.unpaired_depth += 1,
                 Pairing::Pair(pair) => {
                     let (c, d) = *pair;
-                    self.frame(ctx, writer, make_processor, hooks, c, d)?
+                    self.frame(ctx, output, make_processor, hooks, c, d)?
                 }
             }
         }
@@ -743,16 +927,16 @@ impl FrameLoop {
         };
         while self.pending.front().is_some_and(|m| m.header.log_time <= limit) {
             if let Some(m) = self.pending.pop_front() {
-                writer.copy_message(&m.header, &m.data)?;
+                output.send(WriteOp::Copy(m))?;
             }
         }
         Ok(())
     }
 
-    fn frame<W: Write + Seek>(
+    fn frame(
         &mut self,
         ctx: &FrameContext<'_>,
-        writer: &mut AnnotatedWriter<W>,
+        output: &OutputQueue,
         make_processor: &mut ProcessorFactory<'_>,
         hooks: &mut dyn ProcessHooks,
         color: Queued,
@@ -824,14 +1008,17 @@ impl FrameLoop {
                 .processor
                 .insert(make_processor(ctx.intrinsics, size, ctx.config.pose_mode)?),
         };
-        let process_start = ctx.config.timings.then(Instant::now);
+        let pipeline_start = Instant::now();
         let result = processor.process(&RgbdFrame {
             timestamp_ns: stamp,
             gray: &self.gray,
             depth_m: &self.depth_m,
             world_from_camera: external,
         })?;
-        let process_ms = process_start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3);
+        let pipeline_s = pipeline_start.elapsed().as_secs_f64();
+        self.report.timings.pipeline_s += pipeline_s;
+        // Measured always (the report), written only with --timings (output bytes).
+        let process_ms = if ctx.config.timings { pipeline_s * 1e3 } else { 0.0 };
 
         // Copy everything that precedes this frame's new messages.
         while self
@@ -840,7 +1027,7 @@ impl FrameLoop {
             .is_some_and(|m| m.header.log_time <= color.log_time_ns)
         {
             if let Some(m) = self.pending.pop_front() {
-                writer.copy_message(&m.header, &m.data)?;
+                output.send(WriteOp::Copy(m))?;
             }
         }
         let moving = moving_pixels(&result.mask);
@@ -864,20 +1051,20 @@ impl FrameLoop {
             decode_ms: finite_or_zero(decode_ms),
             process_ms: finite_or_zero(process_ms),
         };
-        writer.write_frame(&FrameAnnotation {
-            log_time_ns: color.log_time_ns,
-            timestamp_ns: stamp,
-            frame_id: &color.frame_id,
-            mask: &result.mask,
-            world_from_camera: &result.world_from_camera,
-            accumulation: result.accumulation.as_ref(),
-            stats: &stats,
-        })?;
         let pose = StampedPose {
             timestamp_ns: stamp,
             world_from_camera: result.world_from_camera,
         };
         hooks.frame_done(&pose, &result.mask)?;
+        output.send(WriteOp::Frame(Box::new(FrameWrite {
+            log_time_ns: color.log_time_ns,
+            timestamp_ns: stamp,
+            frame_id: color.frame_id,
+            mask: result.mask,
+            world_from_camera: result.world_from_camera,
+            accumulation: result.accumulation,
+            stats,
+        })))?;
         self.report.frames += 1;
         self.report.last_timestamp_ns = Some(stamp);
         Ok(())

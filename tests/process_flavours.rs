@@ -482,3 +482,54 @@ fn truncated_recording_is_read_up_to_its_last_complete_record() {
         "the output is a complete file"
     );
 }
+
+/// A sink that fails like a full disk once `limit` bytes are written.
+struct FullDisk {
+    inner: Cursor<Vec<u8>>,
+    limit: usize,
+}
+
+impl std::io::Write for FullDisk {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.inner.get_ref().len() + buf.len() > self.limit {
+            return Err(std::io::Error::other("no space left on device (test)"));
+        }
+        self.inner.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl std::io::Seek for FullDisk {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.inner.seek(pos)
+    }
+}
+
+#[test]
+fn a_write_error_on_the_writer_thread_is_the_error_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_input(dir.path(), Flavor::Protobuf, &FixtureSpec::default());
+    let mut config = ProcessConfig::default();
+    // Small chunks, so chunks are flushed (and fail) on the writer thread, mid-stream.
+    config.annotate.write.chunk_size_bytes = 4096;
+    let (full, _) = run(&path, &config).unwrap();
+    let input = McapInput::open(&path).unwrap();
+    let sink = FullDisk {
+        inner: Cursor::new(Vec::new()),
+        limit: full.len() / 2,
+    };
+    let err = process_file(&input, sink, &config, &mut test_factory, &mut NoHooks)
+        .err()
+        .expect("a full disk must fail the run");
+    // The whole chain, as the CLI prints it (`{:#}`).
+    let mut chain = err.to_string();
+    let mut source = std::error::Error::source(&err);
+    while let Some(s) = source {
+        chain.push_str(&format!(": {s}"));
+        source = s.source();
+    }
+    assert!(chain.contains("no space left on device"), "{chain}");
+    assert!(!chain.contains("writer stopped"), "{chain}");
+}

@@ -124,7 +124,7 @@ pub struct ProcessArgs {
     pub accumulation: bool,
 
     /// Measure per-frame decode/processing times into /occmask/stats (output bytes then
-    /// differ between runs).
+    /// differ between runs), and print where each file's frame loop spent its time.
     #[arg(long)]
     pub timings: bool,
 
@@ -511,6 +511,9 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let failed = results.iter().filter(|r| r.outcome.is_err()).count();
     if !globals.quiet {
         print_summary(&results, &jobs);
+        if args.timings {
+            print_timings(&results);
+        }
     }
     for r in &results {
         match &r.outcome {
@@ -593,6 +596,31 @@ fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
         ));
     }
     out
+}
+
+/// `--timings`: where each file's frame loop spent its time (the pipeline should dominate).
+fn print_timings(results: &[JobResult]) {
+    let mut out = std::io::stderr().lock();
+    let _ = writeln!(
+        out,
+        "{:<32} {:>7} {:>9} {:>11} {:>12} {:>12}",
+        "frame loop (s)", "loop", "pipeline", "input wait", "output wait", "writer tail"
+    );
+    for r in results {
+        if let Ok((rep, _)) = &r.outcome {
+            let t = &rep.timings;
+            let name = r
+                .input
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let _ = writeln!(
+                out,
+                "{name:<32} {:>7.3} {:>9.3} {:>11.3} {:>12.3} {:>12.3}",
+                t.loop_s, t.pipeline_s, t.input_wait_s, t.output_wait_s, t.writer_tail_s
+            );
+        }
+    }
 }
 
 fn print_summary(results: &[JobResult], jobs: &[Job]) {
