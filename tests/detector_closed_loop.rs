@@ -126,10 +126,10 @@ fn entering_while_panning() {
     assert_f1(Scenario::EnteringWhilePanning, F1_TARGET);
 }
 
-/// TARGET MISSED (measured 0.748; 0.795 with the true pose): see `detector_synthetic.rs`.
+/// TARGET MISSED (measured 0.808; 0.839 with the true pose): see `detector_synthetic.rs`.
 #[test]
 fn still_then_moving_below_target() {
-    assert_f1(Scenario::StillThenMoving, 0.74);
+    assert_f1(Scenario::StillThenMoving, 0.80);
 }
 
 #[test]

@@ -93,13 +93,25 @@ fn entering_while_panning() {
     assert_f1(Scenario::EnteringWhilePanning, F1_TARGET);
 }
 
-/// TARGET MISSED (measured 0.795). A box that stood still is background; when it starts moving
-/// only the parts leaving its old footprint occlude anything (≈ 15 frames of partial recall),
-/// and while it leaves the view at the border the whole visible remainder lies in once-predicted
-/// area and is pruned (§5.3) for the last frames.
+/// TARGET MISSED (measured 0.839; 0.795 before predicted remainders leaving through the border
+/// were kept). A box that stood still is background; when it starts moving only the parts leaving
+/// its old footprint occlude anything (frames 31–47: recall rises linearly 0.04 → 0.91, inherent
+/// to occlusion accumulation, README "Accuracy"). While it leaves the view at the right border
+/// (frames 85–87) its visible remainder lies entirely in once-predicted area: it must stay
+/// detected (`OcclusionConfig::prune_exit_margin_px`), until it is smaller than the object
+/// threshold (frame 88, 636 px).
 #[test]
 fn still_then_moving_below_target() {
-    assert_f1(Scenario::StillThenMoving, 0.79);
+    let (summary, counts) = run(Scenario::StillThenMoving);
+    assert!(summary.mean_f1 >= 0.83, "mean F1 {:.3}", summary.mean_f1);
+    assert!(summary.mean_precision >= 0.95);
+    for (i, c) in counts.iter().enumerate().take(88).skip(85) {
+        assert!(
+            c.recall() >= 0.6,
+            "frame {i}: recall {:.3} while leaving the view",
+            c.recall()
+        );
+    }
 }
 
 #[test]

@@ -399,21 +399,34 @@ impl Components {
         filled
     }
 
-    /// Step 12: erases (from A and O) every 8-connected component of `predicted` that has no
-    /// pixel adjacent to an object pixel outside `predicted`. The label buffer must hold
-    /// [`UNLABELLED`] on `predicted` pixels and 0 elsewhere (the detector's object-mask pass
-    /// writes it), and `predicted` must be empty outside `bounds`. Returns the pixels erased.
+    /// Step 12: erases (from A, O and P) every 8-connected component of `predicted` that has no
+    /// pixel adjacent to an object pixel outside `predicted`, unless it is a leaving object's
+    /// remainder: it holds a pixel of `predicted_carried` (predicted object in the previous
+    /// frame) and reaches within `config.prune_exit_margin_px` of the image border. The label
+    /// buffer must hold [`UNLABELLED`] on `predicted` pixels and 0 elsewhere (the detector's
+    /// object-mask pass writes it), and `predicted` must be empty outside `bounds`. P is cleared
+    /// on erased components so that "carried from P" always means "predicted object that
+    /// survived pruning" (the release leaves P set there). Returns the pixels erased.
     pub(super) fn prune_unattached_predictions(
         &mut self,
-        adjacency: Adjacency,
+        config: &OcclusionConfig,
         bounds: PixelBounds,
-        predicted: &Image<u8>,
+        predicted_carried: &Image<u8>,
+        predicted: &mut Image<u8>,
         mask: &mut Mask,
         accumulation_m: &mut DepthMeters,
     ) -> usize {
         let (width, height) = (self.width, self.height);
-        let p = predicted.as_slice();
-        let neighbours: &[(isize, isize)] = match adjacency {
+        let exit_margin_px = config.prune_exit_margin_px;
+        let carried = predicted_carried.as_slice();
+        let near_border = |q: u32| {
+            let (x, y) = (q as usize % width, q as usize / width);
+            x < exit_margin_px
+                || y < exit_margin_px
+                || x + exit_margin_px >= width
+                || y + exit_margin_px >= height
+        };
+        let neighbours: &[(isize, isize)] = match config.prune_adjacency {
             Adjacency::Four => &NEIGHBOURS_4,
             Adjacency::Eight => &NEIGHBOURS_8,
         };
@@ -425,18 +438,28 @@ impl Components {
             }
             next_id += 1;
             self.flood(seed, next_id);
-            let m = mask.as_slice();
+            let (m, p) = (mask.as_slice(), predicted.as_slice());
             let attached = self.component.iter().any(|&q| {
                 let (x, y) = (q as usize % width, q as usize / width);
                 neighbours.iter().any(|&(dx, dy)| {
                     neighbour(x, y, dx, dy, width, height).is_some_and(|n| m[n] != 0 && p[n] == 0)
                 })
             });
-            if !attached {
-                let (m, a) = (mask.as_mut_slice(), accumulation_m.as_mut_slice());
+            // An object leaving the view: its non-predicted part went out through the border
+            // and the rest, predicted at some earlier frame and object since, is still there.
+            let leaving = exit_margin_px > 0
+                && self.component.iter().any(|&q| carried[q as usize] != 0)
+                && self.component.iter().any(|&q| near_border(q));
+            if !attached && !leaving {
+                let (m, a, p) = (
+                    mask.as_mut_slice(),
+                    accumulation_m.as_mut_slice(),
+                    predicted.as_mut_slice(),
+                );
                 for &q in &self.component {
                     m[q as usize] = 0;
                     a[q as usize] = 0.0;
+                    p[q as usize] = 0;
                 }
                 pruned += self.component.len();
             }

@@ -1,0 +1,409 @@
+//! Per-frame accuracy of the occlusion detector, for diagnosis.
+//!
+//! Synthetic scenarios (640×480, seed 1), true pose or DVO closed loop:
+//! `cargo run --release --example detector_accuracy -- synthetic <scenario|all> <true|dvo> [--frames]`
+//! prints mean F1 / precision / recall per scenario and, with `--frames`, every frame's TP, FP,
+//! FN, precision, recall, F1 and the detector's counts (predicted, pruned, thin-erased pixels).
+//!
+//! Real static sequences (TUM layout, depth factor 5000, ground-truth poses):
+//! `cargo run --release --example detector_accuracy -- real <dir> <fx> <fy> <cx> <cy> [--frames] [--dump DIR]`
+//! prints the false-positive fraction per frame after 5 warm-up frames; `--dump` writes, per
+//! frame with false positives, a PNG of the depth (gray) with the mask in red (outside the repo:
+//! 7-Scenes frames must not be copied into it).
+
+// A diagnosis tool: a failing setup is a bug worth a panic.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Isometry3;
+use occmask::dvo::DvoConfig;
+use occmask::geometry::PinholeIntrinsics;
+use occmask::image_buf::{depth_m_from_u16_into, DepthMeters, Image, ImageSize, Mask};
+use occmask::metrics::{FrameCounts, SegmentationTally};
+use occmask::occlusion::consistency::depth_consistency;
+use occmask::occlusion::{OcclusionConfig, OcclusionDetector, OcclusionStats};
+use occmask::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
+use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
+use occmask::time::parse_seconds_to_ns;
+use occmask::trajectory::{interpolate, parse_tum_line, StampedPose};
+
+/// The default config with overrides from the environment (for experiments):
+/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN.
+fn detector_config() -> OcclusionConfig {
+    let mut config = OcclusionConfig::default();
+    let get = |name: &str| std::env::var(name).ok().map(|v| v.parse::<usize>().unwrap());
+    if let Some(v) = get("OCC_EXIT_MARGIN") {
+        config.prune_exit_margin_px = v;
+    }
+    if let Some(v) = get("OCC_THIN_RADIUS") {
+        config.thin_structure_radius_px = v;
+    }
+    if let Some(v) = get("OCC_THIN_MARGIN") {
+        config.thin_structure_border_margin_px = v;
+    }
+    config
+}
+
+const SIZE: ImageSize = ImageSize::new(640, 480);
+const WARM_UP_FRAMES: usize = 5;
+/// Largest gap between bracketing ground-truth poses (TUM mocap ≈ 100 Hz, 7-Scenes 30 Hz).
+const MAX_GT_GAP_NS: u64 = 50_000_000;
+
+fn print_frame(i: usize, c: &FrameCounts, s: &OcclusionStats) {
+    println!(
+        "{i:4} tp {:6} fp {:6} fn {:6}  P {:.3} R {:.3} F1 {:.3}  predicted {:5} pruned {:5} thin {:5} small {:3}{}",
+        c.true_positives,
+        c.false_positives,
+        c.false_negatives,
+        c.precision(),
+        c.recall(),
+        c.f1(),
+        s.predicted_pixels,
+        s.pruned_pixels,
+        s.thin_pixels_erased,
+        s.small_components_erased,
+        if s.motion_rejected { "  MOTION REJECTED" } else { "" }
+    );
+}
+
+/// Depth in gray, true positives green, false positives red, false negatives blue.
+fn dump_errors(path: &Path, depth: &DepthMeters, mask: &Mask, truth: &Mask) {
+    let mut out = image::RgbImage::new(depth.width() as u32, depth.height() as u32);
+    for y in 0..depth.height() {
+        for x in 0..depth.width() {
+            let z = depth.get(x, y);
+            let g = if z > 0.0 {
+                (255.0 * (1.0 - (z / 5.0).min(1.0))) as u8
+            } else {
+                0
+            };
+            let p = match (mask.get(x, y) != 0, truth.get(x, y) != 0) {
+                (true, true) => [g / 3, 255, g / 3],
+                (true, false) => [255, g / 3, g / 3],
+                (false, true) => [g / 3, g / 3, 255],
+                (false, false) => [g, g, g],
+            };
+            out.put_pixel(x as u32, y as u32, image::Rgb(p));
+        }
+    }
+    out.save(path).unwrap();
+}
+
+fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path>) {
+    let config = SequenceConfig {
+        size: SIZE,
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(scenario, config);
+    let mut detector = OcclusionDetector::new(SIZE, config.intrinsics(), detector_config()).unwrap();
+    let mut processor = Processor::new(
+        SIZE,
+        config.intrinsics(),
+        ProcessorConfig {
+            pose_source: PoseSource::DvoClosedLoop(DvoConfig::default()),
+            occlusion: detector_config(),
+            ..ProcessorConfig::default()
+        },
+    )
+    .unwrap();
+    let mut tally = SegmentationTally::default();
+    let mut rejected = Vec::new();
+    let mut max_empty_fp: f64 = 0.0;
+    let mut frame = sequence.frame(0);
+    let mut previous_depth = frame.depth_m.clone();
+    let mut previous_mask = frame.gt_mask.clone();
+    let mut min_consistency: f64 = 1.0;
+    for i in 0..sequence.len() {
+        sequence.render_into(i, &mut frame);
+        let mut motion = sequence.current_from_previous(i);
+        let (mask, stats): (&Mask, OcclusionStats) = if dvo {
+            let out = processor
+                .process(&FrameInput {
+                    timestamp_ns: frame.timestamp_ns,
+                    gray: &frame.gray,
+                    depth_m: &frame.depth_m,
+                    world_from_marker: None,
+                })
+                .unwrap();
+            motion = out.current_from_previous;
+            (out.mask, out.stats.detector)
+        } else {
+            detector
+                .update(&frame.depth_m, &sequence.current_from_previous(i))
+                .unwrap();
+            (detector.mask(), *detector.stats())
+        };
+        let consistency = depth_consistency(
+            &config.intrinsics(),
+            &previous_depth,
+            Some(&previous_mask),
+            &frame.depth_m,
+            &motion,
+            4,
+        )
+        .unwrap_or(1.0)
+            - depth_consistency(
+                &config.intrinsics(),
+                &previous_depth,
+                Some(&previous_mask),
+                &frame.depth_m,
+                &Isometry3::identity(),
+                4,
+            )
+            .unwrap_or(1.0);
+        if i > 0 {
+            min_consistency = min_consistency.min(consistency);
+        }
+        previous_depth.copy_from(&frame.depth_m).unwrap();
+        previous_mask.copy_from(mask).unwrap();
+        if stats.motion_rejected {
+            rejected.push(i);
+        }
+        let counts = tally.add_masks(mask, &frame.gt_mask).unwrap();
+        if i >= WARM_UP_FRAMES && counts.truth_is_empty() {
+            max_empty_fp = max_empty_fp.max(counts.false_positive_fraction());
+        }
+        if frames {
+            print_frame(i, &counts, &stats);
+            println!("     consistency {consistency:.3}");
+        }
+        if let Some(d) = dump_dir {
+            dump_errors(
+                &d.join(format!("{}_{i:03}.png", scenario.name())),
+                &frame.depth_m,
+                mask,
+                &frame.gt_mask,
+            );
+        }
+    }
+    let s = tally.summary();
+    println!(
+        "{:24} {}: F1 {:.3} P {:.3} R {:.3} ({} frames with objects), max FP on empty frames after {WARM_UP_FRAMES}: {:.3} %, min motion consistency {min_consistency:.3}, motion rejected at {rejected:?}",
+        scenario.name(),
+        if dvo { "closed loop" } else { "true pose  " },
+        s.mean_f1,
+        s.mean_precision,
+        s.mean_recall,
+        s.frames_with_truth,
+        100.0 * max_empty_fp
+    );
+}
+
+fn list(dir: &Path, file: &str) -> Vec<(u64, PathBuf)> {
+    std::fs::read_to_string(dir.join(file))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let mut fields = l.split_whitespace();
+            let t = parse_seconds_to_ns(fields.next().unwrap()).unwrap();
+            (t, dir.join(fields.next().unwrap()))
+        })
+        .collect()
+}
+
+fn dump(path: &Path, depth: &DepthMeters, mask: &Mask) {
+    let mut out = image::RgbImage::new(depth.width() as u32, depth.height() as u32);
+    for y in 0..depth.height() {
+        for x in 0..depth.width() {
+            let z = depth.get(x, y);
+            let g = if z > 0.0 {
+                (255.0 * (1.0 - (z / 5.0).min(1.0))) as u8
+            } else {
+                0
+            };
+            let p = if mask.get(x, y) != 0 {
+                [255, g / 3, g / 3]
+            } else {
+                [g, g, g]
+            };
+            out.put_pixel(x as u32, y as u32, image::Rgb(p));
+        }
+    }
+    out.save(path).unwrap();
+}
+
+fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Option<&Path>) {
+    let truth: Vec<StampedPose> = std::fs::read_to_string(dir.join("groundtruth.txt"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| parse_tum_line(l).unwrap())
+        .collect();
+    let mut detector = OcclusionDetector::new(SIZE, intrinsics, detector_config()).unwrap();
+    let mut depth = Image::filled(SIZE, 0.0f32);
+    let mut previous: Option<Isometry3<f64>> = None;
+    let mut previous_depth = Image::filled(SIZE, 0.0f32);
+    let mut min_consistency: f64 = 1.0;
+    let mut fractions = Vec::new();
+    let mut rejected = Vec::new();
+    for (t, path) in list(dir, "depth.txt") {
+        let Some(world_from_camera) = interpolate(&truth, t, MAX_GT_GAP_NS) else {
+            continue;
+        };
+        let image = image::open(&path).unwrap().into_luma16();
+        depth_m_from_u16_into(image.as_raw(), 5000.0, &mut depth).unwrap();
+        let motion = previous.map_or_else(Isometry3::identity, |p| world_from_camera.inverse() * p);
+        previous = Some(world_from_camera);
+        let consistency = depth_consistency(&intrinsics, &previous_depth, None, &depth, &motion, 4)
+            .unwrap_or(1.0)
+            - depth_consistency(
+                &intrinsics,
+                &previous_depth,
+                None,
+                &depth,
+                &Isometry3::identity(),
+                4,
+            )
+            .unwrap_or(1.0);
+        if previous.is_some() && previous_depth.as_slice().iter().any(|&z| z > 0.0) {
+            min_consistency = min_consistency.min(consistency);
+        }
+        previous_depth.copy_from(&depth).unwrap();
+        let mask = detector.update(&depth, &motion).unwrap();
+        let set = mask.as_slice().iter().filter(|&&m| m != 0).count();
+        let fraction = set as f64 / SIZE.area() as f64;
+        let i = fractions.len();
+        if detector.stats().motion_rejected {
+            rejected.push(i);
+        }
+        if frames {
+            let s = detector.stats();
+            println!(
+                "{i:4} consistency {consistency:.3} FP {:.3} %  predicted {:5} pruned {:5} thin {:5} small {:3} components {:3}",
+                100.0 * fraction,
+                s.predicted_pixels,
+                s.pruned_pixels,
+                s.thin_pixels_erased,
+                s.small_components_erased,
+                s.components
+            );
+        }
+        if let Some(d) = dump_dir {
+            if set > 0 && i >= WARM_UP_FRAMES {
+                dump(&d.join(format!("{i:04}.png")), &depth, detector.mask());
+            }
+        }
+        fractions.push(fraction);
+    }
+    let after = &fractions[WARM_UP_FRAMES..];
+    let worst = after.iter().copied().fold(0.0, f64::max);
+    let mean = after.iter().sum::<f64>() / after.len() as f64;
+    let above = after.iter().filter(|&&f| f > 0.01).count();
+    println!(
+        "{}: {} frames, FP after warm-up: mean {:.3} %, max {:.3} %, {above} frames above 1 %, min consistency {min_consistency:.3}, motion rejected at {rejected:?}",
+        dir.display(),
+        fractions.len(),
+        100.0 * mean,
+        100.0 * worst
+    );
+}
+
+fn inlier_fraction(
+    intrinsics: &PinholeIntrinsics,
+    previous: &DepthMeters,
+    current: &DepthMeters,
+    previous_from_current: &Isometry3<f64>,
+) -> f64 {
+    depth_consistency(
+        intrinsics,
+        previous,
+        None,
+        current,
+        &previous_from_current.inverse(),
+        1,
+    )
+    .unwrap_or(0.0)
+}
+
+/// For frames `first..=last`: the inlier fraction of the ground-truth motion, of identity, of
+/// the motion interpolated halfway between the neighbours' poses, and of scaled translations.
+fn probe(dir: &Path, intrinsics: PinholeIntrinsics, first: usize, last: usize) {
+    let truth: Vec<StampedPose> = std::fs::read_to_string(dir.join("groundtruth.txt"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| parse_tum_line(l).unwrap())
+        .collect();
+    let files = list(dir, "depth.txt");
+    let load = |i: usize| {
+        let mut depth = Image::filled(SIZE, 0.0f32);
+        let image = image::open(&files[i].1).unwrap().into_luma16();
+        depth_m_from_u16_into(image.as_raw(), 5000.0, &mut depth).unwrap();
+        depth
+    };
+    let pose = |i: usize| interpolate(&truth, files[i].0, MAX_GT_GAP_NS).unwrap();
+    for k in first..=last {
+        let (previous, current) = (load(k - 1), load(k));
+        let gt = pose(k - 1).inverse() * pose(k);
+        let mut line = format!(
+            "{k:4} gt {:.3} id {:.3}",
+            inlier_fraction(&intrinsics, &previous, &current, &gt),
+            inlier_fraction(&intrinsics, &previous, &current, &Isometry3::identity())
+        );
+        for s in [0.0, 0.5, 1.5] {
+            let mut m = gt;
+            m.translation.vector *= s;
+            line += &format!(
+                " t×{s} {:.3}",
+                inlier_fraction(&intrinsics, &previous, &current, &m)
+            );
+        }
+        if k + 1 < files.len() {
+            // Halfway between k−1 and k+1 (as if frame k's pose were interpolated).
+            let mid = pose(k - 1).lerp_slerp(&pose(k + 1), 0.5);
+            let m = pose(k - 1).inverse() * mid;
+            line += &format!(
+                " mid {:.3}",
+                inlier_fraction(&intrinsics, &previous, &current, &m)
+            );
+        }
+        println!("{line}");
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let frames = args.iter().any(|a| a == "--frames");
+    match args.first().map(String::as_str) {
+        Some("synthetic") => {
+            let which = args.get(1).map_or("all", String::as_str);
+            let dump_dir = args
+                .iter()
+                .position(|a| a == "--dump")
+                .map(|i| PathBuf::from(&args[i + 1]));
+            if let Some(d) = &dump_dir {
+                std::fs::create_dir_all(d).unwrap();
+            }
+            let dvo = args.get(2).is_some_and(|m| m == "dvo");
+            for scenario in Scenario::ALL {
+                if which == "all" || which == scenario.name() {
+                    synthetic(scenario, dvo, frames, dump_dir.as_deref());
+                }
+            }
+        }
+        Some("real") => {
+            let dir = PathBuf::from(&args[1]);
+            let k: Vec<f64> = args[2..6].iter().map(|s| s.parse().unwrap()).collect();
+            let dump_dir = args
+                .iter()
+                .position(|a| a == "--dump")
+                .map(|i| PathBuf::from(&args[i + 1]));
+            if let Some(d) = &dump_dir {
+                std::fs::create_dir_all(d).unwrap();
+            }
+            real(&dir, PinholeIntrinsics::new(k[0], k[1], k[2], k[3]), frames, dump_dir.as_deref());
+        }
+        Some("probe") => {
+            let k: Vec<f64> = args[2..6].iter().map(|s| s.parse().unwrap()).collect();
+            probe(
+                Path::new(&args[1]),
+                PinholeIntrinsics::new(k[0], k[1], k[2], k[3]),
+                args[6].parse().unwrap(),
+                args[7].parse().unwrap(),
+            );
+        }
+        _ => eprintln!("usage: detector_accuracy synthetic <scenario|all> <true|dvo> [--frames] | real <dir> fx fy cx cy [--frames] [--dump DIR]"),
+    }
+}

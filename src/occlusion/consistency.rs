@@ -1,0 +1,75 @@
+//! Does a camera motion agree with the depth of two frames? A cheap check run before the
+//! detector accumulates a frame: with the right motion, a true backward warp of the current depth
+//! lands on the previous depth almost everywhere (only moving objects and their edges disagree);
+//! with a wrong motion (a glitch in a ground-truth trajectory, a wrong DVO minimum) every depth
+//! edge is misregistered, and occlusion accumulation would turn those misregistered edges into
+//! static false positives that stay in A until they leave the view.
+
+use nalgebra::{Isometry3, Point3};
+
+use crate::geometry::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, Mask};
+
+/// Two depths agree when they differ by at most this fraction of the depth (Kinect v1 noise is
+/// σ ≈ 1.4e-3·Z², i.e. 0.6 % of Z at 4 m: 2 % is more than 3σ up to the sensor's 4.5 m range).
+const RELATIVE_TOLERANCE: f64 = 0.02;
+/// ... and at least this much (m): disparity quantisation and rounding to the nearest pixel.
+const MIN_TOLERANCE_M: f64 = 0.02;
+
+/// Fraction of the sampled current pixels (every `stride`-th row and column, valid depth) whose
+/// true backward warp with `current_from_previous` lands inside the previous image on a valid
+/// previous depth that agrees with the warped point's depth. Samples landing on a set pixel of
+/// `previous_mask` (known moving objects) are not counted. `None` when no sample lands on a valid
+/// previous depth (or the sizes differ).
+pub fn depth_consistency(
+    intrinsics: &PinholeIntrinsics,
+    previous_depth_m: &DepthMeters,
+    previous_mask: Option<&Mask>,
+    current_depth_m: &DepthMeters,
+    current_from_previous: &Isometry3<f64>,
+    stride: usize,
+) -> Option<f64> {
+    let previous_from_current = current_from_previous.inverse();
+    let (width, height) = (current_depth_m.width(), current_depth_m.height());
+    let mask_size_differs = previous_mask.is_some_and(|m| m.size() != current_depth_m.size());
+    if width == 0 || height == 0 || previous_depth_m.size() != current_depth_m.size() || mask_size_differs {
+        return None;
+    }
+    let stride = stride.max(1);
+    let (mut agreeing, mut compared) = (0usize, 0usize);
+    for y in (0..height).step_by(stride) {
+        let row = current_depth_m.row(y);
+        for x in (0..width).step_by(stride) {
+            let z = f64::from(row[x]);
+            if z <= 0.0 {
+                continue;
+            }
+            let q = previous_from_current * intrinsics.back_project(x as f64, y as f64, z);
+            let Some((u, v)) = nearest_pixel(intrinsics, &q, width, height) else {
+                continue;
+            };
+            let z_previous = f64::from(previous_depth_m.row(v)[u]);
+            if z_previous <= 0.0 || previous_mask.is_some_and(|m| m.row(v)[u] != 0) {
+                continue;
+            }
+            compared += 1;
+            let tolerance = (RELATIVE_TOLERANCE * q.z).max(MIN_TOLERANCE_M);
+            agreeing += usize::from((z_previous - q.z).abs() <= tolerance);
+        }
+    }
+    (compared > 0).then(|| agreeing as f64 / compared as f64)
+}
+
+/// The pixel nearest to the projection of `point`, if it is in front of the camera and inside
+/// [0, W−1] × [0, H−1].
+fn nearest_pixel(
+    intrinsics: &PinholeIntrinsics,
+    point: &Point3<f64>,
+    width: usize,
+    height: usize,
+) -> Option<(usize, usize)> {
+    let p = intrinsics.project(point)?;
+    let (u, v) = (p.x.round(), p.y.round());
+    let inside = u >= 0.0 && v >= 0.0 && u <= (width - 1) as f64 && v <= (height - 1) as f64;
+    inside.then_some((u as usize, v as usize))
+}
