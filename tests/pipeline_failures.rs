@@ -29,6 +29,17 @@ enum Disturbance {
     TexturelessWall,
 }
 
+/// `disturbance` on the frames in `frames`, nothing on the others.
+fn during(frames: std::ops::Range<usize>, disturbance: Disturbance) -> impl Fn(usize) -> Disturbance {
+    move |i| {
+        if frames.contains(&i) {
+            disturbance
+        } else {
+            Disturbance::None
+        }
+    }
+}
+
 fn disturb(frame: &mut SyntheticFrame, d: Disturbance) {
     match d {
         Disturbance::None => {}
@@ -191,13 +202,7 @@ fn blackout_falls_back_then_recovers() {
     let records = run(
         &seq,
         ProcessorConfig::default(),
-        |i| {
-            if (start..end).contains(&i) {
-                Disturbance::Blackout
-            } else {
-                Disturbance::None
-            }
-        },
+        during(start..end, Disturbance::Blackout),
         |i| seq.world_from_camera(i),
     );
     assert!(frames_below(&records, OBJECT_VISIBLE_FROM, 0.9)
@@ -261,13 +266,7 @@ fn short_depth_dropout_is_bridged_without_losing_the_masks() {
     let records = run(
         &seq,
         ProcessorConfig::default(),
-        |i| {
-            if (start..end).contains(&i) {
-                Disturbance::NoDepth
-            } else {
-                Disturbance::None
-            }
-        },
+        during(start..end, Disturbance::NoDepth),
         |i| seq.world_from_camera(i),
     );
     assert_eq!(outcomes(&records, start..end), vec!["no_depth"; end - start]);
@@ -292,13 +291,7 @@ fn flat_colour_keeps_the_detector_on_constant_velocity() {
     let records = run(
         &seq,
         ProcessorConfig::default(),
-        |i| {
-            if (start..end).contains(&i) {
-                Disturbance::BlackColour
-            } else {
-                Disturbance::None
-            }
-        },
+        during(start..end, Disturbance::BlackColour),
         |i| seq.world_from_camera(i),
     );
     assert_eq!(outcomes(&records, start..end), vec!["no_texture"; end - start]);
@@ -320,13 +313,7 @@ fn structureless_gray_never_reports_a_converged_motion() {
     let records = run(
         &seq,
         ProcessorConfig::default(),
-        |i| {
-            if (start..end).contains(&i) {
-                Disturbance::NoisyFlat
-            } else {
-                Disturbance::None
-            }
-        },
+        during(start..end, Disturbance::NoisyFlat),
         |i| seq.world_from_camera(i),
     );
     for (k, r) in records[start..end].iter().enumerate() {

@@ -43,8 +43,9 @@ fn scores_match_hand_computed_values() {
     let out = processed(dir.path(), &config, "ext");
     let report = evaluate(&out).unwrap();
     assert_eq!(report.estimated_masks, 12);
-    let seg = report.segmentation.unwrap();
-    assert_eq!(seg.matched_frames, 12);
+    let segmentation = report.segmentation.unwrap();
+    assert_eq!(segmentation.matched_frames, 12);
+    let seg = segmentation.scores;
     assert_eq!(seg.frames_with_truth, 12);
     // The test processor marks the 2-px strips the square leaves and enters: per moving frame
     // TP = 24, FP = 24, FN = 120 → F1 = 48 / 192 = 0.25; frame 0 has an empty mask (F1 = 0).

@@ -1,19 +1,27 @@
-//! Converted files must pass real MCAP clients: `pymcap-cli doctor --strict-message-order`
-//! and the Python `mcap` reader decoding every message with the protobuf schemas embedded in
-//! the file (tests/validate_mcap.py).
+//! Files written by `convert` and `process` must pass real MCAP clients:
+//! `pymcap-cli doctor --strict-message-order`, and the Python `mcap` reader decoding every
+//! message with the schemas embedded in the file (protobuf, ROS 2 CDR, JSON):
+//! tests/validate_mcap.py for converted files, tests/process_validate.py for `process`
+//! outputs of every input flavour, annotated copies and sidecars.
 //!
-//! Needs `OCCMASK_PYTHON` (a Python with mcap, mcap-protobuf-support and pymcap-cli; `.ci/run`
-//! creates `.venv-ci` and sets it). Without it the test fails under CI (`CI` set) and is
-//! skipped with a notice otherwise.
+//! Needs `OCCMASK_PYTHON` (a Python with mcap, mcap-protobuf-support, mcap-ros2-support and
+//! pymcap-cli; `.ci/run` creates `.venv-ci` and sets it). Without it the tests fail under CI
+//! (`CI` set) and are skipped with a notice otherwise.
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns: a panic is the failure report
 
 mod common;
+mod process_support;
 
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::*;
+use occmask::mcap_io::annotate::AnnotateOptions;
+use occmask::mcap_io::input::McapInput;
+use occmask::process::{process_file, NoHooks, ProcessConfig};
+use process_support::{fixture_bytes, test_factory, FixtureSpec, ALL_FLAVORS};
 
 fn python() -> Option<PathBuf> {
     match std::env::var_os("OCCMASK_PYTHON") {
@@ -44,7 +52,9 @@ fn pymcap_cli(python: &Path) -> PathBuf {
     }
 }
 
-fn validate(python: &Path, file: &Path, expected: &[&str]) {
+/// `pymcap-cli doctor` finds no error and no warning, then `script` (a validator in tests/,
+/// run with `args` after the file) exits 0.
+fn validate(python: &Path, file: &Path, script: &str, args: &[&str]) {
     let doctor = Command::new(pymcap_cli(python))
         .args(["doctor", "--strict-message-order", "--format", "jsonl"])
         .arg(file)
@@ -62,11 +72,10 @@ fn validate(python: &Path, file: &Path, expected: &[&str]) {
         "{report}"
     );
 
-    let script = repo().join("tests/validate_mcap.py");
     let read = Command::new(python)
-        .arg(&script)
+        .arg(repo().join("tests").join(script))
         .arg(file)
-        .args(expected)
+        .args(args)
         .output()
         .expect("cannot run the Python validator");
     assert!(
@@ -101,6 +110,7 @@ fn converted_files_pass_doctor_and_the_python_reader() {
     validate(
         &python,
         &desk,
+        "validate_mcap.py",
         &[
             "/camera/rgb/image=50",
             "/camera/rgb/camera_info=50",
@@ -129,7 +139,35 @@ fn converted_files_pass_doctor_and_the_python_reader() {
         validate(
             &python,
             &larr,
+            "validate_mcap.py",
             &["/camera/rgb/image=4", "/groundtruth/mask=4", "/tf=59"],
         );
+    }
+}
+
+#[test]
+fn process_outputs_of_every_flavour_pass_doctor_and_the_python_readers() {
+    let Some(python) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    for flavor in ALL_FLAVORS {
+        for sidecar in [false, true] {
+            let input_path = dir.path().join(format!("{flavor:?}.mcap"));
+            std::fs::write(&input_path, fixture_bytes(flavor, &FixtureSpec::default())).unwrap();
+            let input = McapInput::open(&input_path).unwrap();
+            let out = dir.path().join(format!("{flavor:?}-{sidecar}.out.mcap"));
+            let config = ProcessConfig {
+                annotate: AnnotateOptions {
+                    copy_input: !sidecar,
+                    accumulation: true,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            let file = BufWriter::new(std::fs::File::create(&out).unwrap());
+            let (sink, _) = process_file(&input, file, &config, &mut test_factory, &mut NoHooks).unwrap();
+            sink.into_inner().unwrap().sync_all().unwrap();
+            // 12 frames in the default fixture.
+            validate(&python, &out, "process_validate.py", &["12"]);
+        }
     }
 }

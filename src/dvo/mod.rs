@@ -570,25 +570,37 @@ impl DvoEstimator {
             let gray = level.gray.as_slice();
             let ignore = &self.ignore[l];
             let min_grad_sq = cfg.min_gradient_per_px * cfg.min_gradient_per_px;
-            for (i, (&z, &g)) in depth.iter().zip(gray).enumerate() {
-                if !(z > 0.0 && z >= cfg.min_depth_m && z <= cfg.max_depth_m) {
-                    continue;
-                }
-                if min_grad_sq > 0.0 {
-                    let s = &level.samples[i].0;
-                    let (gx, gy) = (s[TargetSample::GRAD_X], s[TargetSample::GRAD_Y]);
-                    if gx * gx + gy * gy < min_grad_sq {
+            // Row by row (no division per pixel); the tests are the same for every pixel.
+            for (y, ((depth_row, gray_row), sample_row)) in depth
+                .chunks_exact(w)
+                .zip(gray.chunks_exact(w))
+                .zip(level.samples.chunks_exact(w))
+                .enumerate()
+            {
+                let ignore_row = if have_mask {
+                    &ignore[y * w..(y + 1) * w]
+                } else {
+                    &[][..]
+                };
+                let ray_y = (y as f32 - cy) * fy_inv;
+                for (x, ((&z, &g), sample)) in depth_row.iter().zip(gray_row).zip(sample_row).enumerate() {
+                    if !(z > 0.0 && z >= cfg.min_depth_m && z <= cfg.max_depth_m) {
                         continue;
                     }
+                    if min_grad_sq > 0.0 {
+                        let (gx, gy) = (sample.0[TargetSample::GRAD_X], sample.0[TargetSample::GRAD_Y]);
+                        if gx * gx + gy * gy < min_grad_sq {
+                            continue;
+                        }
+                    }
+                    if have_mask && ignore_row[x] != 0 {
+                        continue;
+                    }
+                    pts.push(ReferencePoint {
+                        point_m: [(x as f32 - cx) * fx_inv * z, ray_y * z, z],
+                        intensity: g,
+                    });
                 }
-                if have_mask && ignore[i] != 0 {
-                    continue;
-                }
-                let (x, y) = ((i % w) as f32, (i / w) as f32);
-                pts.push(ReferencePoint {
-                    point_m: [(x - cx) * fx_inv * z, (y - cy) * fy_inv * z, z],
-                    intensity: g,
-                });
             }
         }
         Ok(())
@@ -851,24 +863,30 @@ impl DvoTracker {
                 });
             }
         }
-        self.current.build(gray, depth_m)?;
         if !self.has_reference {
+            self.current.build(gray, depth_m)?;
             std::mem::swap(&mut self.reference, &mut self.current);
             self.has_reference = true;
             return Ok(None);
         }
+        // The new frame's pyramid and the reference's point lists are independent: build them
+        // side by side (the point lists are a serial pass; the pyramid is row-parallel).
+        let (current, estimator, reference) = (&mut self.current, &mut self.estimator, &self.reference);
+        let (built, prepared) = rayon::join(
+            || current.build(gray, depth_m),
+            || estimator.prepare_reference(reference, ignore_in_reference),
+        );
+        built?;
+        prepared?;
         let prior = if self.config().init_from_previous_motion {
             self.previous_motion
         } else {
             None
         };
         let initial = initial_current_from_reference.copied().or(prior);
-        let estimate = self.estimator.estimate(
-            &self.reference,
-            &self.current,
-            ignore_in_reference,
-            initial.as_ref(),
-        )?;
+        let estimate = self
+            .estimator
+            .estimate_prepared(&self.current, initial.as_ref())?;
         std::mem::swap(&mut self.reference, &mut self.current);
         self.previous_motion = estimate.is_converged().then_some(estimate.current_from_reference);
         Ok(Some(estimate))

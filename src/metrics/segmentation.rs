@@ -102,7 +102,7 @@ pub struct SegmentationTally {
 }
 
 /// Sequence averages (NaN-free: means over zero frames are 0 and flagged by the counts).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct SegmentationSummary {
     /// Frames with a non-empty ground truth (the F1 average's frames).
     pub frames_with_truth: usize,

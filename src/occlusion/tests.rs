@@ -1,6 +1,8 @@
 use nalgebra::{Isometry3, Vector3};
 
-use super::transport::{transport, transport_scalar, TransportInputs, TransportOutputs, TransportScratch};
+use super::transport::{
+    transport, transport_scalar, transport_with, Simd, TransportInputs, TransportOutputs, TransportScratch,
+};
 use super::*;
 use crate::synthetic::{DepthSensorModel, Scenario, SequenceConfig, SyntheticSequence};
 
@@ -87,6 +89,29 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             object_labels: &mut l1,
         },
     );
+    // The AVX2 build (when the CPU has it) and the baseline build agree bit for bit.
+    let (mut zc3, mut a3, mut p3, mut dz3, mut n3, mut l3) = blank();
+    let baseline = transport_with(
+        Simd::Baseline,
+        &inputs,
+        &mut scratch,
+        TransportOutputs {
+            compensated_m: &mut zc3,
+            accumulation_m: &mut a3,
+            predicted_carried: &mut p3,
+            delta_z_m: &mut dz3,
+            newly_discovered: &mut n3,
+            object_labels: &mut l3,
+        },
+    );
+    let bits = |img: &DepthMeters| img.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(fast, baseline);
+    assert_eq!(bits(&zc1), bits(&zc3));
+    assert_eq!(bits(&a1), bits(&a3));
+    assert_eq!(bits(&dz1), bits(&dz3));
+    assert_eq!(p1.as_slice(), p3.as_slice());
+    assert_eq!(n1.as_slice(), n3.as_slice());
+    assert_eq!(l1, l3);
     let slow = transport_scalar(
         &inputs,
         TransportOutputs {

@@ -33,6 +33,59 @@ const ROUND_MAGIC: f32 = 8_388_608.0;
 /// Warp source of a pixel whose warp is invalid.
 const NO_SOURCE: u32 = u32::MAX;
 
+/// Which build of the per-row kernels runs. Each kernel is one generic body compiled twice:
+/// for the x86-64 baseline (SSE2) and with AVX2 + FMA enabled, where the compiler evaluates
+/// the same loops 8 lanes wide and the gather with `vpgatherdd`. No kernel calls `mul_add`,
+/// so both builds compute bit-identical results (tested).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Simd {
+    /// The x86-64 baseline (or any other architecture).
+    Baseline,
+    /// AVX2 + FMA (x86-64 only, chosen at run time when the CPU has them).
+    Avx2,
+}
+
+impl Simd {
+    /// The widest build this CPU runs.
+    pub fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+                return Self::Avx2;
+            }
+        }
+        Self::Baseline
+    }
+}
+
+/// `fn $name(simd, args…)`: runs `$generic(args…)` (an `#[inline(always)]` body) from a
+/// baseline or an AVX2 + FMA function. Both are separate non-inlined functions whose slice
+/// arguments the compiler knows do not alias.
+macro_rules! simd_kernel {
+    ($name:ident, $avx2:ident, $generic:ident, ($($arg:ident: $ty:ty),*) $(-> $ret:ty)?) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        #[allow(clippy::too_many_arguments)]
+        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
+            $generic($($arg),*)
+        }
+
+        #[inline(never)]
+        #[allow(clippy::too_many_arguments)]
+        fn $name(simd: Simd, $($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            {
+                if simd == Simd::Avx2 {
+                    // SAFETY: `Simd::Avx2` is only chosen when the CPU has AVX2 and FMA.
+                    return unsafe { $avx2($($arg),*) };
+                }
+            }
+            let _ = simd;
+            $generic($($arg),*)
+        }
+    };
+}
+
 /// Inclusive bounding box of a pixel set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PixelBounds {
@@ -165,11 +218,28 @@ impl TransportCounts {
 }
 
 /// The fused row-parallel transport kernel (f32 warp). Also writes the object labels O₀.
+/// Runs the widest build the CPU supports ([`Simd::detect`]).
 pub fn transport(
     inputs: &TransportInputs<'_>,
     scratch: &mut TransportScratch,
     outputs: TransportOutputs<'_>,
 ) -> TransportCounts {
+    transport_with(Simd::detect(), inputs, scratch, outputs)
+}
+
+/// [`transport`] with an explicit kernel build (`Simd::Avx2` requires a CPU with AVX2 + FMA:
+/// pass [`Simd::detect`]'s answer or `Simd::Baseline`).
+pub fn transport_with(
+    simd: Simd,
+    inputs: &TransportInputs<'_>,
+    scratch: &mut TransportScratch,
+    outputs: TransportOutputs<'_>,
+) -> TransportCounts {
+    let simd = if simd == Simd::Avx2 {
+        Simd::detect()
+    } else {
+        Simd::Baseline
+    };
     let width = inputs.depth_m.width();
     let height = inputs.depth_m.height();
     let area = width * height;
@@ -250,9 +320,12 @@ pub fn transport(
                     } else {
                         dz_row.copy_from_slice(previous_row);
                     }
-                    warp_row(&warp, row_term, (terms_x, terms_y, terms_z), dz_row, source_row);
+                    warp_row(
+                        simd, &warp, row_term, terms_x, terms_y, terms_z, dz_row, source_row,
+                    );
                     // Pass 2: gather and finish (steps 3–9) and the object labels.
                     let row_counts = finish_row(
+                        simd,
                         &finish,
                         measured_row,
                         source_row,
@@ -302,11 +375,13 @@ struct WarpParameters {
 /// One row of the warp (algorithm.md §1 step 2): `z_then_qz` holds the back-projection depth
 /// on entry and the warped point's depth z′ on return; `sources` gets the nearest previous
 /// pixel or `NO_SOURCE`. Branch-free, on equal-length slices, so it vectorises.
-#[inline(never)]
-fn warp_row(
+#[inline(always)]
+fn warp_row_generic(
     warp: &WarpParameters,
     row_term: [f32; 3],
-    (terms_x, terms_y, terms_z): (&[f32], &[f32], &[f32]),
+    terms_x: &[f32],
+    terms_y: &[f32],
+    terms_z: &[f32],
     z_then_qz: &mut [f32],
     sources: &mut [u32],
 ) {
@@ -337,6 +412,21 @@ fn warp_row(
         z_then_qz[i] = qz;
     }
 }
+
+simd_kernel!(
+    warp_row,
+    warp_row_avx2,
+    warp_row_generic,
+    (
+        warp: &WarpParameters,
+        row_term: [f32; 3],
+        terms_x: &[f32],
+        terms_y: &[f32],
+        terms_z: &[f32],
+        z_then_qz: &mut [f32],
+        sources: &mut [u32]
+    )
+);
 
 /// `value` clamped into [0, max], NaN → 0. Written as two selects (one SSE `maxps`/`minps`
 /// each) rather than `f32::max`/`min`, whose NaN rules cost extra instructions per lane.
@@ -385,8 +475,9 @@ const FINISH_BLOCK: usize = 128;
 /// One row of steps 3–9 plus the object labels: per block of pixels, gathers the previous Zc,
 /// A, P at the warp sources (scalar loads), then finishes every pixel in a branch-free loop the
 /// compiler vectorises.
-#[inline(never)]
+#[allow(clippy::too_many_arguments)]
 fn finish_row(
+    simd: Simd,
     finish: &FinishParameters,
     measured_row: &[f32],
     sources: &[u32],
@@ -410,13 +501,16 @@ fn finish_row(
         let mut sampled = [0.0f32; FINISH_BLOCK];
         let mut carried_a = [0.0f32; FINISH_BLOCK];
         let mut carried_p = [0u8; FINISH_BLOCK];
-        // Gather (an invalid source reads pixel `last_pixel`, discarded below).
-        for (i, &source) in sources.iter().enumerate() {
-            let at = (source as usize).min(last_pixel);
-            sampled[i] = previous_zc[at];
-            carried_a[i] = previous_a[at];
-            carried_p[i] = previous_p[at];
-        }
+        gather_block(
+            simd,
+            sources,
+            previous_zc,
+            previous_a,
+            previous_p,
+            &mut sampled[..len],
+            &mut carried_a[..len],
+            &mut carried_p[..len],
+        );
         let measured = &measured_row[start..end];
         let zc_row = &mut out.compensated_m[start..end];
         let a_row = &mut out.accumulation_m[start..end];
@@ -426,6 +520,7 @@ fn finish_row(
         let label_row = &mut out.object_labels[start..end];
         // Three single-width loops (f32; f32 → u32; to u8) so each one vectorises.
         let warped_count = finish_block(
+            simd,
             finish,
             sources,
             measured,
@@ -434,8 +529,16 @@ fn finish_row(
             a_row,
             dz_row,
         );
-        let object_count = object_labels_block(finish, zc_row, a_row, label_row);
-        let newly_count = flags_block(sources, &sampled[..len], zc_row, &carried_p[..len], n_row, p_row);
+        let object_count = object_labels_block(simd, finish, zc_row, a_row, label_row);
+        let newly_count = flags_block(
+            simd,
+            sources,
+            &sampled[..len],
+            zc_row,
+            &carried_p[..len],
+            n_row,
+            p_row,
+        );
         counts.warped += warped_count as usize;
         counts.newly_discovered += newly_count as usize;
         counts.object += object_count as usize;
@@ -453,8 +556,8 @@ fn finish_row(
 /// Steps 3–8 on one block (f32 only; every slice a separate argument so the compiler knows
 /// they do not alias and vectorises): `sampled` gets the validity-masked previous depth, ΔZ
 /// holds z′ on entry (geometric mode). Returns the warped pixels.
-#[inline(never)]
-fn finish_block(
+#[inline(always)]
+fn finish_block_generic(
     finish: &FinishParameters,
     sources: &[u32],
     measured: &[f32],
@@ -491,9 +594,69 @@ fn finish_block(
     warped_count
 }
 
+simd_kernel!(
+    finish_block,
+    finish_block_avx2,
+    finish_block_generic,
+    (
+        finish: &FinishParameters,
+        sources: &[u32],
+        measured: &[f32],
+        sampled_and_carried_a: (&mut [f32], &[f32]),
+        zc_row: &mut [f32],
+        a_row: &mut [f32],
+        dz_row: &mut [f32]
+    ) -> u32
+);
+
+/// Gathers the previous Zc, A, P at the warp sources of one block (an invalid source reads
+/// pixel `last_pixel`, discarded by the finishing loops).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn gather_block_generic(
+    sources: &[u32],
+    previous_zc: &[f32],
+    previous_a: &[f32],
+    previous_p: &[u8],
+    sampled: &mut [f32],
+    carried_a: &mut [f32],
+    carried_p: &mut [u8],
+) {
+    let len = sources.len();
+    let last_pixel = previous_zc.len() - 1;
+    let (previous_a, previous_p) = (&previous_a[..=last_pixel], &previous_p[..=last_pixel]);
+    let (sampled, carried_a, carried_p) = (&mut sampled[..len], &mut carried_a[..len], &mut carried_p[..len]);
+    for i in 0..len {
+        let at = (sources[i] as usize).min(last_pixel);
+        sampled[i] = previous_zc[at];
+        carried_a[i] = previous_a[at];
+        carried_p[i] = previous_p[at];
+    }
+}
+
+simd_kernel!(
+    gather_block,
+    gather_block_avx2,
+    gather_block_generic,
+    (
+        sources: &[u32],
+        previous_zc: &[f32],
+        previous_a: &[f32],
+        previous_p: &[u8],
+        sampled: &mut [f32],
+        carried_a: &mut [f32],
+        carried_p: &mut [u8]
+    )
+);
+
 /// O₀ labels of one block: [`UNLABELLED`] where A > τ_α. Returns the object pixels.
-#[inline(never)]
-fn object_labels_block(finish: &FinishParameters, zc_row: &[f32], a_row: &[f32], labels: &mut [u32]) -> u32 {
+#[inline(always)]
+fn object_labels_block_generic(
+    finish: &FinishParameters,
+    zc_row: &[f32],
+    a_row: &[f32],
+    labels: &mut [u32],
+) -> u32 {
     let len = labels.len();
     let (zc_row, a_row) = (&zc_row[..len], &a_row[..len]);
     let mut object_count = 0u32;
@@ -506,9 +669,16 @@ fn object_labels_block(finish: &FinishParameters, zc_row: &[f32], a_row: &[f32],
     object_count
 }
 
+simd_kernel!(
+    object_labels_block,
+    object_labels_block_avx2,
+    object_labels_block_generic,
+    (finish: &FinishParameters, zc_row: &[f32], a_row: &[f32], labels: &mut [u32]) -> u32
+);
+
 /// Ñ and P̂ of one block (`sampled` already masked by validity). Returns |Ñ|.
-#[inline(never)]
-fn flags_block(
+#[inline(always)]
+fn flags_block_generic(
     sources: &[u32],
     sampled: &[f32],
     zc_row: &[f32],
@@ -528,6 +698,20 @@ fn flags_block(
     }
     newly_count
 }
+
+simd_kernel!(
+    flags_block,
+    flags_block_avx2,
+    flags_block_generic,
+    (
+        sources: &[u32],
+        sampled: &[f32],
+        zc_row: &[f32],
+        carried_p: &[u8],
+        newly_row: &mut [u8],
+        p_row: &mut [u8]
+    ) -> u32
+);
 
 /// Reference implementation: the algorithm.md §1 steps as separate full-image passes, with f64
 /// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
