@@ -316,18 +316,19 @@ struct Prefetched {
 }
 
 /// Bytes (messages plus decoded pixels) the prefetch thread may read ahead of processing:
-/// about four VGA frames (1.5 MB of messages and 2.5 MB of decoded grey and depth each), so the
-/// next frame is decoded while the current one is processed even with many small messages
-/// (pose streams) between images, while memory stays flat. (It was 8 messages: less than one
+/// two VGA frames (1.5 MB of messages and 2.5 MB of decoded grey and depth each), so the next
+/// frame is decoded while the current one is processed even with many small messages (pose
+/// streams) between images, while memory stays flat. (It was 8 messages: less than one
 /// TUM frame, whose 100 Hz motion capture puts ~36 messages between images, so decoding
 /// stalled until the pipeline had finished the frame before.)
-pub const PREFETCH_BYTES: usize = 16 << 20;
+pub const PREFETCH_BYTES: usize = 8 << 20;
 /// Messages the prefetch thread may read ahead, whatever their size.
 pub const PREFETCH_MAX_MESSAGES: usize = 4096;
 
-/// Bytes (copied messages, masks) the frame loop may queue ahead of the writer thread: a few
-/// frames, so a chunk flush does not stall the pipeline.
-pub const WRITE_QUEUE_BYTES: usize = 16 << 20;
+/// Bytes (copied messages, masks) the frame loop may queue ahead of the writer thread: about
+/// four VGA frames (1.5 MB of copied messages and a 0.3 MB mask each), so a chunk flush does
+/// not stall the pipeline.
+pub const WRITE_QUEUE_BYTES: usize = 8 << 20;
 /// Output operations queued ahead of the writer thread, whatever their size.
 pub const WRITE_QUEUE_MAX_OPS: usize = 4096;
 

@@ -6,19 +6,17 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use clap::{Args as ClapArgs, Subcommand, ValueEnum};
+use clap::{Args as ClapArgs, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use occmask::convert::{
     convert_sequence, resolve_intrinsics, ConvertConfig, ConvertReport, DEFAULT_BATCH_EVENTS,
 };
 use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
-use occmask::mcap_io::writer::{
-    DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_COMPRESSION_LEVEL, DEFAULT_COMPRESSION_THREADS,
-};
-use occmask::mcap_io::{AtomicOutput, Compression, McapWriteOptions};
+use occmask::mcap_io::AtomicOutput;
 use occmask::time::format_ns_as_seconds;
 
+use super::options::{parse_camera_arg, parse_non_negative, parse_positive, WriteArgs};
 use super::{command_line, Globals, Outcome};
 
 const CONVERT_EXAMPLES: &str = "\
@@ -106,17 +104,6 @@ pub struct LarrArgs {
     pub depth_units_per_meter: f64,
 }
 
-/// Chunk compression choices.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum CompressionArg {
-    /// Smallest files.
-    Zstd,
-    /// Faster, larger.
-    Lz4,
-    /// No compression.
-    None,
-}
-
 /// Options shared by every dataset family.
 #[derive(Debug, ClapArgs)]
 pub struct CommonArgs {
@@ -139,41 +126,9 @@ pub struct CommonArgs {
     #[arg(long)]
     pub keep_unpaired: bool,
 
-    /// Chunk compression.
-    #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
-    pub compression: CompressionArg,
-
-    /// Compression level (0 = the codec's default, 3 for zstd; 19 is smallest and slowest).
-    #[arg(long, default_value_t = DEFAULT_COMPRESSION_LEVEL)]
-    pub compression_level: u32,
-
-    /// Uncompressed chunk size, MiB.
-    #[arg(long, value_parser = parse_positive, default_value_t = (DEFAULT_CHUNK_SIZE_BYTES >> 20) as f64)]
-    pub chunk_size_mib: f64,
-
-    /// zstd worker threads (0 = compress on the writing thread).
-    #[arg(long, default_value_t = DEFAULT_COMPRESSION_THREADS)]
-    pub compression_threads: u32,
-}
-
-fn parse_camera_arg(text: &str) -> Result<String, String> {
-    dataset::parse_camera(text)
-        .map(|_| text.to_owned())
-        .map_err(|e| e.to_string())
-}
-
-fn parse_positive(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        _ => Err(format!("expected a positive number, found {text:?}")),
-    }
-}
-
-fn parse_non_negative(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        _ => Err(format!("expected a number >= 0, found {text:?}")),
-    }
+    /// Compression and chunking.
+    #[command(flatten)]
+    pub write: WriteArgs,
 }
 
 /// Runs `occmask convert`.
@@ -216,16 +171,7 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         depth_units_per_meter: depth_units.unwrap_or(kind.default_depth_units_per_meter()),
         max_pair_gap_ns: (common.max_pair_gap_ms * 1e6).round() as u64,
         keep_unpaired: common.keep_unpaired,
-        write: McapWriteOptions {
-            compression: match common.compression {
-                CompressionArg::Zstd => Compression::Zstd,
-                CompressionArg::Lz4 => Compression::Lz4,
-                CompressionArg::None => Compression::None,
-            },
-            compression_level: common.compression_level,
-            chunk_size_bytes: (common.chunk_size_mib * 1024.0 * 1024.0) as u64,
-            compression_threads: common.compression_threads,
-        },
+        write: common.write.options(),
         batch_events: DEFAULT_BATCH_EVENTS,
         command_line: command_line(),
     };

@@ -7,6 +7,7 @@
 pub mod convert;
 pub mod demo;
 pub mod eval;
+pub mod options;
 pub mod process;
 pub mod signals;
 

@@ -17,9 +17,6 @@ use occmask::image_buf::Mask;
 use occmask::mcap_io::annotate::AnnotateOptions;
 use occmask::mcap_io::input::detect::TopicOverrides;
 use occmask::mcap_io::input::McapInput;
-use occmask::mcap_io::writer::{
-    Compression, McapWriteOptions, DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_COMPRESSION_THREADS,
-};
 use occmask::mcap_io::AtomicOutput;
 use occmask::process::{
     process_file, PoseMode, ProcessConfig, ProcessHooks, ProcessReport, DEFAULT_MAX_POSE_GAP_NS,
@@ -28,7 +25,7 @@ use occmask::process::{
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
 
-use super::convert::CompressionArg;
+use super::options::{parse_camera_arg, parse_non_negative, parse_positive, WriteArgs};
 use super::{Globals, Outcome};
 
 const AFTER_HELP: &str = "\
@@ -144,29 +141,9 @@ pub struct ProcessArgs {
     #[arg(short, long)]
     pub jobs: Option<usize>,
 
-    /// Chunk compression.
-    #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
-    pub compression: CompressionArg,
-}
-
-fn parse_camera_arg(text: &str) -> Result<String, String> {
-    dataset::parse_camera(text)
-        .map(|_| text.to_owned())
-        .map_err(|e| e.to_string())
-}
-
-fn parse_positive(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        _ => Err(format!("expected a positive number, found {text:?}")),
-    }
-}
-
-fn parse_non_negative(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        _ => Err(format!("expected a number >= 0, found {text:?}")),
-    }
+    /// Compression and chunking of the output.
+    #[command(flatten)]
+    pub write: WriteArgs,
 }
 
 fn parse_seconds(text: &str) -> Result<u64, String> {
@@ -274,16 +251,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
         annotate: AnnotateOptions {
             copy_input: !args.sidecar,
             accumulation: args.accumulation,
-            write: McapWriteOptions {
-                compression: match args.compression {
-                    CompressionArg::Zstd => Compression::Zstd,
-                    CompressionArg::Lz4 => Compression::Lz4,
-                    CompressionArg::None => Compression::None,
-                },
-                chunk_size_bytes: DEFAULT_CHUNK_SIZE_BYTES,
-                compression_threads: DEFAULT_COMPRESSION_THREADS,
-                ..McapWriteOptions::default()
-            },
+            write: args.write.options(),
             ..Default::default()
         },
     })

@@ -1,0 +1,129 @@
+//! Options and value parsers shared by several subcommands (one definition, flattened into each
+//! command's clap struct, so flag names, defaults and help stay the same everywhere).
+
+use clap::{Args as ClapArgs, ValueEnum};
+
+use occmask::dataset;
+use occmask::mcap_io::writer::{
+    DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_COMPRESSION_LEVEL, DEFAULT_COMPRESSION_THREADS,
+};
+use occmask::mcap_io::{Compression, McapWriteOptions};
+
+/// Chunk compression choices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CompressionArg {
+    /// Smallest files.
+    Zstd,
+    /// Faster, larger.
+    Lz4,
+    /// No compression.
+    None,
+}
+
+/// How the output MCAP is written (`convert` and `process`).
+#[derive(Debug, Clone, ClapArgs)]
+pub struct WriteArgs {
+    /// Chunk compression.
+    #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
+    pub compression: CompressionArg,
+
+    /// Compression level (0 = the codec's default, 3 for zstd; 19 is smallest and slowest).
+    #[arg(long, default_value_t = DEFAULT_COMPRESSION_LEVEL)]
+    pub compression_level: u32,
+
+    /// Uncompressed chunk size, MiB.
+    #[arg(long, value_parser = parse_positive, default_value_t = (DEFAULT_CHUNK_SIZE_BYTES >> 20) as f64)]
+    pub chunk_size_mib: f64,
+
+    /// zstd worker threads (0 = compress on the writing thread).
+    #[arg(long, default_value_t = DEFAULT_COMPRESSION_THREADS)]
+    pub compression_threads: u32,
+}
+
+impl WriteArgs {
+    /// The library's write options.
+    pub fn options(&self) -> McapWriteOptions {
+        McapWriteOptions {
+            compression: match self.compression {
+                CompressionArg::Zstd => Compression::Zstd,
+                CompressionArg::Lz4 => Compression::Lz4,
+                CompressionArg::None => Compression::None,
+            },
+            compression_level: self.compression_level,
+            chunk_size_bytes: (self.chunk_size_mib * 1024.0 * 1024.0) as u64,
+            compression_threads: self.compression_threads,
+        }
+    }
+}
+
+/// `--camera`: a preset name or FX,FY,CX,CY, checked at parse time.
+pub fn parse_camera_arg(text: &str) -> Result<String, String> {
+    dataset::parse_camera(text)
+        .map(|_| text.to_owned())
+        .map_err(|e| e.to_string())
+}
+
+/// A finite number > 0.
+pub fn parse_positive(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a positive number, found {text:?}")),
+    }
+}
+
+/// A finite number >= 0.
+pub fn parse_non_negative(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("expected a number >= 0, found {text:?}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        write: WriteArgs,
+    }
+
+    #[test]
+    fn defaults_are_the_library_defaults() {
+        let cli = Cli::try_parse_from(["x"]).unwrap();
+        assert_eq!(cli.write.options(), McapWriteOptions::default());
+    }
+
+    #[test]
+    fn flags_map_to_write_options() {
+        let cli = Cli::try_parse_from([
+            "x",
+            "--compression",
+            "lz4",
+            "--compression-level",
+            "5",
+            "--chunk-size-mib",
+            "0.5",
+            "--compression-threads",
+            "0",
+        ])
+        .unwrap();
+        let o = cli.write.options();
+        assert_eq!(o.compression, Compression::Lz4);
+        assert_eq!(o.compression_level, 5);
+        assert_eq!(o.chunk_size_bytes, 512 * 1024);
+        assert_eq!(o.compression_threads, 0);
+        assert!(Cli::try_parse_from(["x", "--chunk-size-mib", "0"]).is_err());
+    }
+
+    #[test]
+    fn parsers_reject_what_they_must() {
+        assert_eq!(parse_positive("2.5"), Ok(2.5));
+        assert!(parse_positive("0").is_err() && parse_positive("nan").is_err());
+        assert_eq!(parse_non_negative("0"), Ok(0.0));
+        assert!(parse_non_negative("-1").is_err() && parse_non_negative("inf").is_err());
+        assert!(parse_camera_arg("fr2").is_ok() && parse_camera_arg("banana").is_err());
+    }
+}
