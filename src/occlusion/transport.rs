@@ -35,7 +35,7 @@ const NO_SOURCE: u32 = u32::MAX;
 
 /// Which build of the per-row kernels runs. Each kernel is one generic body compiled twice:
 /// for the x86-64 baseline (SSE2) and with AVX2 + FMA enabled, where the compiler evaluates
-/// the same loops 8 lanes wide and the gather with `vpgatherdd`. No kernel calls `mul_add`,
+/// the same loops 8 lanes wide (the gather stays scalar loads). No kernel calls `mul_add`,
 /// so both builds compute bit-identical results (tested).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Simd {
