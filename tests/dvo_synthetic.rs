@@ -8,11 +8,12 @@ use occmask::geometry::{se3_exp, Twist};
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use occmask::synthetic::{motion_pair, SequenceConfig};
 
-/// Issue 3 targets 1 mm and 0.05° per frame pair. Rotation is met everywhere; translation
-/// reaches 2.45 mm over the 8 seeds (static, 6 motions; 2.03 mm with the box masked), always
-/// along the x/yaw or y/pitch ambiguity of a distant fronto-parallel scene (1.4 mm there moves
-/// the image by 0.03 px at 640×480): a bias of the rendered data, see the README.
-const MAX_TRANS_ERR_MM: f64 = 3.0;
+/// Issue 3's targets: 1 mm and 0.05° per frame pair. With pixel-area-integrated colour
+/// (`SequenceConfig::colour_samples_per_axis`, jittered 2 × 2) the 144 cases of the multi-seed
+/// test end within 0.82 mm / 0.011° (static) and 0.58 mm / 0.008° (masked). The point-sampled
+/// renderer of session 1 aliased the texture on the grazing floor and ceiling (the scene's
+/// only parallax) and biased translation by up to 2.45 mm; see the README.
+const MAX_TRANS_ERR_MM: f64 = 1.0;
 const MAX_ROT_ERR_DEG: f64 = 0.05;
 
 /// Motions up to 5 cm and 3° per frame, mixing all six directions.
