@@ -17,10 +17,10 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
-use occmask::dvo::DvoConfig;
+use occmask::dvo::{DvoConfig, DvoStatus};
 use occmask::geometry::PinholeIntrinsics;
-use occmask::image_buf::{depth_m_from_u16_into, DepthMeters, Image, ImageSize, Mask};
-use occmask::metrics::{FrameCounts, SegmentationTally};
+use occmask::image_buf::{depth_m_from_u16_into, gray_from_rgb8, DepthMeters, Image, ImageSize, Mask};
+use occmask::metrics::{rpe, FrameCounts, SegmentationTally};
 use occmask::occlusion::consistency::depth_consistency;
 use occmask::occlusion::{OcclusionConfig, OcclusionDetector, OcclusionStats};
 use occmask::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
@@ -29,7 +29,7 @@ use occmask::time::parse_seconds_to_ns;
 use occmask::trajectory::{interpolate, parse_tum_line, StampedPose};
 
 /// The default config with overrides from the environment (for experiments):
-/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN.
+/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off).
 fn detector_config() -> OcclusionConfig {
     let mut config = OcclusionConfig::default();
     let get = |name: &str| std::env::var(name).ok().map(|v| v.parse::<usize>().unwrap());
@@ -38,6 +38,9 @@ fn detector_config() -> OcclusionConfig {
     }
     if let Some(v) = get("OCC_THIN_RADIUS") {
         config.thin_structure_radius_px = v;
+    }
+    if get("OCC_MOTION_CHECK") == Some(0) {
+        config.motion_check_margin = None;
     }
     if let Some(v) = get("OCC_THIN_MARGIN") {
         config.thin_structure_border_margin_px = v;
@@ -363,6 +366,67 @@ fn probe(dir: &Path, intrinsics: PinholeIntrinsics, first: usize, last: usize) {
     }
 }
 
+/// The DVO closed loop on a real static sequence (gray from the nearest colour image): the
+/// false-positive fraction per frame after the warm-up.
+fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
+    let rgb_files = list(dir, "rgb.txt");
+    let config = ProcessorConfig {
+        occlusion: detector_config(),
+        ..ProcessorConfig::default()
+    };
+    let mut processor = Processor::new(SIZE, intrinsics, config).unwrap();
+    let mut depth = Image::filled(SIZE, 0.0f32);
+    let mut fractions = Vec::new();
+    let (mut not_converged, mut resets, mut rejected) = (0, 0, 0);
+    let truth: Vec<StampedPose> = std::fs::read_to_string(dir.join("groundtruth.txt"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| parse_tum_line(l).unwrap())
+        .collect();
+    let (mut estimated, mut reference) = (Vec::new(), Vec::new());
+    for (t, path) in list(dir, "depth.txt") {
+        let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
+        let rgb = image::open(rgb_path).unwrap().into_rgb8();
+        let pixels = rgb.pixels().map(|p| p.0).collect();
+        let gray = gray_from_rgb8(&Image::from_vec(SIZE, pixels).unwrap());
+        let image = image::open(&path).unwrap().into_luma16();
+        depth_m_from_u16_into(image.as_raw(), 5000.0, &mut depth).unwrap();
+        let out = processor
+            .process(&FrameInput {
+                timestamp_ns: t,
+                gray: &gray,
+                depth_m: &depth,
+                world_from_marker: None,
+            })
+            .unwrap();
+        not_converged += usize::from(out.stats.dvo.is_some_and(|d| d.status != DvoStatus::Converged));
+        resets += usize::from(out.stats.detector_reset);
+        rejected += usize::from(out.stats.detector.motion_rejected);
+        fractions.push(out.stats.moving_fraction);
+        if let Some(pose) = interpolate(&truth, t, MAX_GT_GAP_NS) {
+            estimated.push(out.world_from_camera);
+            reference.push(pose);
+        }
+    }
+    let rpe_1 = rpe(&estimated, &reference, 1).unwrap();
+    println!(
+        "DVO RPE Δ=1 vs ground truth: {:.4} m, {:.3}° ({} pairs)",
+        rpe_1.translation_rmse_m, rpe_1.rotation_rmse_deg, rpe_1.pairs
+    );
+    let after = &fractions[WARM_UP_FRAMES..];
+    let worst = after.iter().copied().fold(0.0, f64::max);
+    let mean = after.iter().sum::<f64>() / after.len() as f64;
+    let above = after.iter().filter(|&&f| f > 0.01).count();
+    println!(
+        "{} (DVO closed loop): {} frames, FP after warm-up: mean {:.3} %, max {:.3} %, {above} frames above 1 %; DVO not converged {not_converged}, pipeline resets {resets}, motion check rejections {rejected}",
+        dir.display(),
+        fractions.len(),
+        100.0 * mean,
+        100.0 * worst
+    );
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let frames = args.iter().any(|a| a == "--frames");
@@ -394,6 +458,28 @@ fn main() {
                 std::fs::create_dir_all(d).unwrap();
             }
             real(&dir, PinholeIntrinsics::new(k[0], k[1], k[2], k[3]), frames, dump_dir.as_deref());
+        }
+        Some("real-dvo") => {
+            let k: Vec<f64> = args[2..6].iter().map(|s| s.parse().unwrap()).collect();
+            real_dvo(Path::new(&args[1]), PinholeIntrinsics::new(k[0], k[1], k[2], k[3]));
+        }
+        Some("bench-check") => {
+            // Time of one motion check (two consistency passes at stride 8) at 640×480.
+            let config = SequenceConfig {
+                size: SIZE,
+                ..SequenceConfig::default()
+            };
+            let sequence = SyntheticSequence::new(Scenario::DominantObject, config);
+            let (a, b) = (sequence.frame(40).depth_m, sequence.frame(41).depth_m);
+            let motion = sequence.current_from_previous(41);
+            let rounds = 200;
+            let started = std::time::Instant::now();
+            let mut sum = 0.0;
+            for _ in 0..rounds {
+                sum += depth_consistency(&config.intrinsics(), &a, None, &b, &motion, 8).unwrap();
+                sum += depth_consistency(&config.intrinsics(), &a, None, &b, &Isometry3::identity(), 8).unwrap();
+            }
+            println!("motion check: {:.3} ms per frame ({sum:.1})", started.elapsed().as_secs_f64() * 1e3 / rounds as f64);
         }
         Some("probe") => {
             let k: Vec<f64> = args[2..6].iter().map(|s| s.parse().unwrap()).collect();

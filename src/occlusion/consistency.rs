@@ -29,7 +29,10 @@ pub fn depth_consistency(
     current_from_previous: &Isometry3<f64>,
     stride: usize,
 ) -> Option<f64> {
+    // The rotation as a matrix: 9 multiply-adds per point instead of a quaternion product.
     let previous_from_current = current_from_previous.inverse();
+    let rotation = previous_from_current.rotation.to_rotation_matrix().into_inner();
+    let translation = previous_from_current.translation.vector;
     let (width, height) = (current_depth_m.width(), current_depth_m.height());
     let mask_size_differs = previous_mask.is_some_and(|m| m.size() != current_depth_m.size());
     if width == 0 || height == 0 || previous_depth_m.size() != current_depth_m.size() || mask_size_differs {
@@ -44,7 +47,8 @@ pub fn depth_consistency(
             if z <= 0.0 {
                 continue;
             }
-            let q = previous_from_current * intrinsics.back_project(x as f64, y as f64, z);
+            let q =
+                Point3::from(rotation * intrinsics.back_project(x as f64, y as f64, z).coords + translation);
             let Some((u, v)) = nearest_pixel(intrinsics, &q, width, height) else {
                 continue;
             };
