@@ -792,6 +792,8 @@ impl Processor {
             }
             self.detector.update(frame.depth_m, &current_from_reference)?;
             stats.detector = *self.detector.stats();
+            // The detector's motion check restarted it (a motion far worse than none).
+            stats.detector_reset |= stats.detector.motion_rejected;
             self.world_from_detector_reference = world_from_camera;
             self.detector_skipped = 0;
             (self.detector.mask(), self.detector.accumulation_m())

@@ -29,6 +29,37 @@ pub fn depth_consistency(
     current_from_previous: &Isometry3<f64>,
     stride: usize,
 ) -> Option<f64> {
+    depth_consistency_counted(
+        intrinsics,
+        previous_depth_m,
+        previous_mask,
+        current_depth_m,
+        current_from_previous,
+        stride,
+    )
+    .map(|c| c.agreeing_fraction)
+}
+
+/// [`depth_consistency`] with the number of samples it compared.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Consistency {
+    /// Fraction of the compared samples whose depths agree.
+    pub agreeing_fraction: f64,
+    /// Samples compared (valid current depth, landing on a valid, unmasked previous depth).
+    pub compared: usize,
+    /// Samples taken (every `stride`-th row and column), compared or not.
+    pub sampled: usize,
+}
+
+/// [`depth_consistency`], also saying on how many samples the fraction rests.
+pub fn depth_consistency_counted(
+    intrinsics: &PinholeIntrinsics,
+    previous_depth_m: &DepthMeters,
+    previous_mask: Option<&Mask>,
+    current_depth_m: &DepthMeters,
+    current_from_previous: &Isometry3<f64>,
+    stride: usize,
+) -> Option<Consistency> {
     // The rotation as a matrix: 9 multiply-adds per point instead of a quaternion product.
     let previous_from_current = current_from_previous.inverse();
     let rotation = previous_from_current.rotation.to_rotation_matrix().into_inner();
@@ -61,7 +92,12 @@ pub fn depth_consistency(
             agreeing += usize::from((z_previous - q.z).abs() <= tolerance);
         }
     }
-    (compared > 0).then(|| agreeing as f64 / compared as f64)
+    let sampled = height.div_ceil(stride) * width.div_ceil(stride);
+    (compared > 0).then(|| Consistency {
+        agreeing_fraction: agreeing as f64 / compared as f64,
+        compared,
+        sampled,
+    })
 }
 
 /// The pixel nearest to the projection of `point`, if it is in front of the camera and inside

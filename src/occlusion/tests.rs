@@ -489,3 +489,34 @@ fn a_wrong_motion_is_rejected_and_restarts_the_detector_instead_of_leaving_false
     assert!(rejected.is_empty());
     assert!(false_positives > 4 * 100, "{false_positives}");
 }
+
+#[test]
+fn the_motion_check_does_not_judge_when_a_moving_object_fills_the_view() {
+    // The same 3° glitch, but the previous mask covers 90 % of the view (an object filling it,
+    // as in the dominant-object demo): the few remaining samples cannot judge the motion, so
+    // the check must not throw the object away.
+    let depth = Image::from_fn(SIZE, |x, y| {
+        if (30..90).contains(&y) && (x % 32) < 16 {
+            1.5f32
+        } else {
+            2.0 + 0.01 * x as f32
+        }
+    });
+    let glitch = Isometry3::new(Vector3::zeros(), Vector3::new(0.0, 3f64.to_radians(), 0.0));
+    let mut detector = OcclusionDetector::new(SIZE, intrinsics(), OcclusionConfig::default()).unwrap();
+    detector.update(&depth, &Isometry3::identity()).unwrap();
+    let covered_rows = SIZE.height * 9 / 10;
+    detector.mask = Image::from_fn(SIZE, |_, y| if y < covered_rows { MASK_SET } else { 0 });
+    detector.update(&depth, &glitch).unwrap();
+    assert!(!detector.stats().motion_rejected, "{:?}", detector.stats());
+    assert!(
+        detector.stats().motion_consistency > 0.0,
+        "the check ran: {:?}",
+        detector.stats()
+    );
+    // With the mask cleared, the same motion is judged and rejected.
+    let mut detector = OcclusionDetector::new(SIZE, intrinsics(), OcclusionConfig::default()).unwrap();
+    detector.update(&depth, &Isometry3::identity()).unwrap();
+    detector.update(&depth, &glitch).unwrap();
+    assert!(detector.stats().motion_rejected, "{:?}", detector.stats());
+}
