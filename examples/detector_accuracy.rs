@@ -145,6 +145,7 @@ fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path
             &motion,
             4,
         )
+        .map(|c| c.agreeing_fraction)
         .unwrap_or(1.0)
             - depth_consistency(
                 &config.intrinsics(),
@@ -154,6 +155,7 @@ fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path
                 &Isometry3::identity(),
                 4,
             )
+            .map(|c| c.agreeing_fraction)
             .unwrap_or(1.0);
         if i > 0 {
             min_consistency = min_consistency.min(consistency);
@@ -250,6 +252,7 @@ fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Optio
         let motion = previous.map_or_else(Isometry3::identity, |p| world_from_camera.inverse() * p);
         previous = Some(world_from_camera);
         let consistency = depth_consistency(&intrinsics, &previous_depth, None, &depth, &motion, 4)
+            .map(|c| c.agreeing_fraction)
             .unwrap_or(1.0)
             - depth_consistency(
                 &intrinsics,
@@ -259,6 +262,7 @@ fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Optio
                 &Isometry3::identity(),
                 4,
             )
+            .map(|c| c.agreeing_fraction)
             .unwrap_or(1.0);
         if previous.is_some() && previous_depth.as_slice().iter().any(|&z| z > 0.0) {
             min_consistency = min_consistency.min(consistency);
@@ -317,6 +321,7 @@ fn inlier_fraction(
         &previous_from_current.inverse(),
         1,
     )
+    .map(|c| c.agreeing_fraction)
     .unwrap_or(0.0)
 }
 
@@ -476,8 +481,8 @@ fn main() {
             let started = std::time::Instant::now();
             let mut sum = 0.0;
             for _ in 0..rounds {
-                sum += depth_consistency(&config.intrinsics(), &a, None, &b, &motion, 8).unwrap();
-                sum += depth_consistency(&config.intrinsics(), &a, None, &b, &Isometry3::identity(), 8).unwrap();
+                sum += depth_consistency(&config.intrinsics(), &a, None, &b, &motion, 8).map(|c| c.agreeing_fraction).unwrap();
+                sum += depth_consistency(&config.intrinsics(), &a, None, &b, &Isometry3::identity(), 8).map(|c| c.agreeing_fraction).unwrap();
             }
             println!("motion check: {:.3} ms per frame ({sum:.1})", started.elapsed().as_secs_f64() * 1e3 / rounds as f64);
         }

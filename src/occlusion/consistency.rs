@@ -16,31 +16,7 @@ const RELATIVE_TOLERANCE: f64 = 0.02;
 /// ... and at least this much (m): disparity quantisation and rounding to the nearest pixel.
 const MIN_TOLERANCE_M: f64 = 0.02;
 
-/// Fraction of the sampled current pixels (every `stride`-th row and column, valid depth) whose
-/// true backward warp with `current_from_previous` lands inside the previous image on a valid
-/// previous depth that agrees with the warped point's depth. Samples landing on a set pixel of
-/// `previous_mask` (known moving objects) are not counted. `None` when no sample lands on a valid
-/// previous depth (or the sizes differ).
-pub fn depth_consistency(
-    intrinsics: &PinholeIntrinsics,
-    previous_depth_m: &DepthMeters,
-    previous_mask: Option<&Mask>,
-    current_depth_m: &DepthMeters,
-    current_from_previous: &Isometry3<f64>,
-    stride: usize,
-) -> Option<f64> {
-    depth_consistency_counted(
-        intrinsics,
-        previous_depth_m,
-        previous_mask,
-        current_depth_m,
-        current_from_previous,
-        stride,
-    )
-    .map(|c| c.agreeing_fraction)
-}
-
-/// [`depth_consistency`] with the number of samples it compared.
+/// What [`depth_consistency`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Consistency {
     /// Fraction of the compared samples whose depths agree.
@@ -51,8 +27,12 @@ pub struct Consistency {
     pub sampled: usize,
 }
 
-/// [`depth_consistency`], also saying on how many samples the fraction rests.
-pub fn depth_consistency_counted(
+/// Fraction of the sampled current pixels (every `stride`-th row and column, valid depth) whose
+/// true backward warp with `current_from_previous` lands inside the previous image on a valid
+/// previous depth that agrees with the warped point's depth. Samples landing on a set pixel of
+/// `previous_mask` (known moving objects) are not counted; the result also says how many samples
+/// were compared. `None` when no sample lands on a valid previous depth (or the sizes differ).
+pub fn depth_consistency(
     intrinsics: &PinholeIntrinsics,
     previous_depth_m: &DepthMeters,
     previous_mask: Option<&Mask>,

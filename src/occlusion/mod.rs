@@ -424,7 +424,7 @@ impl OcclusionDetector {
             return false;
         };
         let consistency = |motion: &Isometry3<f64>| {
-            consistency::depth_consistency_counted(
+            consistency::depth_consistency(
                 &self.intrinsics,
                 &self.compensated_m,
                 Some(&self.mask),

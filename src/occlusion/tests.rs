@@ -452,11 +452,9 @@ fn ideal_sensor_static_sequence_with_true_poses_has_no_false_positives() {
     }
 }
 
-#[test]
-fn a_wrong_motion_is_rejected_and_restarts_the_detector_instead_of_leaving_false_positives() {
-    // A still camera sees a slanted wall (2 m on the left to 3.6 m on the right) with a row of
-    // boxes 1.5 m away; one frame comes with a motion 3° off (≈ 7 px at fx = 131), like the
-    // ground-truth glitches found in TUM fr2_desk and 7-Scenes redkitchen.
+/// A slanted wall (2 m on the left to 3.6 m on the right) with a row of boxes 1.5 m away, and a
+/// motion 3° off (≈ 7 px at fx = 131) for a still camera.
+fn boxes_on_a_slanted_wall_and_a_3_degree_glitch() -> (DepthMeters, Isometry3<f64>) {
     let depth = Image::from_fn(SIZE, |x, y| {
         if (30..90).contains(&y) && (x % 32) < 16 {
             1.5f32
@@ -465,6 +463,15 @@ fn a_wrong_motion_is_rejected_and_restarts_the_detector_instead_of_leaving_false
         }
     });
     let glitch = Isometry3::new(Vector3::zeros(), Vector3::new(0.0, 3f64.to_radians(), 0.0));
+    (depth, glitch)
+}
+
+#[test]
+fn a_wrong_motion_is_rejected_and_restarts_the_detector_instead_of_leaving_false_positives() {
+    // A still camera sees a slanted wall (2 m on the left to 3.6 m on the right) with a row of
+    // boxes 1.5 m away; one frame comes with a motion 3° off (≈ 7 px at fx = 131), like the
+    // ground-truth glitches found in TUM fr2_desk and 7-Scenes redkitchen.
+    let (depth, glitch) = boxes_on_a_slanted_wall_and_a_3_degree_glitch();
     let run = |config: OcclusionConfig| {
         let mut detector = OcclusionDetector::new(SIZE, intrinsics(), config).unwrap();
         let mut rejected = Vec::new();
@@ -495,14 +502,7 @@ fn the_motion_check_does_not_judge_when_a_moving_object_fills_the_view() {
     // The same 3° glitch, but the previous mask covers 90 % of the view (an object filling it,
     // as in the dominant-object demo): the few remaining samples cannot judge the motion, so
     // the check must not throw the object away.
-    let depth = Image::from_fn(SIZE, |x, y| {
-        if (30..90).contains(&y) && (x % 32) < 16 {
-            1.5f32
-        } else {
-            2.0 + 0.01 * x as f32
-        }
-    });
-    let glitch = Isometry3::new(Vector3::zeros(), Vector3::new(0.0, 3f64.to_radians(), 0.0));
+    let (depth, glitch) = boxes_on_a_slanted_wall_and_a_3_degree_glitch();
     let mut detector = OcclusionDetector::new(SIZE, intrinsics(), OcclusionConfig::default()).unwrap();
     detector.update(&depth, &Isometry3::identity()).unwrap();
     let covered_rows = SIZE.height * 9 / 10;
