@@ -294,10 +294,7 @@ fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Optio
         }
         fractions.push(fraction);
     }
-    let after = &fractions[WARM_UP_FRAMES..];
-    let worst = after.iter().copied().fold(0.0, f64::max);
-    let mean = after.iter().sum::<f64>() / after.len() as f64;
-    let above = after.iter().filter(|&&f| f > 0.01).count();
+    let (mean, worst, above) = false_positives_after_warm_up(&fractions);
     println!(
         "{}: {} frames, FP after warm-up: mean {:.3} %, max {:.3} %, {above} frames above 1 %, min consistency {min_consistency:.3}, motion rejected at {rejected:?}",
         dir.display(),
@@ -419,10 +416,7 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
         "DVO RPE Δ=1 vs ground truth: {:.4} m, {:.3}° ({} pairs)",
         rpe_1.translation_rmse_m, rpe_1.rotation_rmse_deg, rpe_1.pairs
     );
-    let after = &fractions[WARM_UP_FRAMES..];
-    let worst = after.iter().copied().fold(0.0, f64::max);
-    let mean = after.iter().sum::<f64>() / after.len() as f64;
-    let above = after.iter().filter(|&&f| f > 0.01).count();
+    let (mean, worst, above) = false_positives_after_warm_up(&fractions);
     println!(
         "{} (DVO closed loop): {} frames, FP after warm-up: mean {:.3} %, max {:.3} %, {above} frames above 1 %; DVO not converged {not_converged}, pipeline resets {resets}, motion check rejections {rejected}",
         dir.display(),
@@ -497,4 +491,14 @@ fn main() {
         }
         _ => eprintln!("usage: detector_accuracy synthetic <scenario|all> <true|dvo> [--frames] | real <dir> fx fy cx cy [--frames] [--dump DIR]"),
     }
+}
+
+/// Mean and largest false-positive fraction after the warm-up frames, and how many frames are
+/// above 1 %.
+fn false_positives_after_warm_up(fractions: &[f64]) -> (f64, f64, usize) {
+    let after = &fractions[WARM_UP_FRAMES.min(fractions.len())..];
+    let worst = after.iter().copied().fold(0.0, f64::max);
+    let mean = after.iter().sum::<f64>() / after.len().max(1) as f64;
+    let above = after.iter().filter(|&&f| f > 0.01).count();
+    (mean, worst, above)
 }
