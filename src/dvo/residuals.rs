@@ -313,10 +313,15 @@ pub fn accumulate_normal_equations(
             .chunks(chunk)
             .fold(NormalEquations::default(), |acc, c| acc.merged(&run(c)));
     }
-    points
-        .par_chunks(chunk)
-        .fold(NormalEquations::default, |acc, c| acc.merged(&run(c)))
-        .reduce(NormalEquations::default, |a, b| a.merged(&b))
+    // The partial systems are summed in point order, as on the calling thread above, not in
+    // whatever grouping work stealing produced (`fold` + `reduce`): the f64 totals then do not
+    // depend on the pool size, so neither do the estimate and `occmask process`'s output
+    // bytes. (Sums of the f32 block totals are usually exact in f64 anyway; this makes it a
+    // guarantee.) The partials are a few dozen 248-byte values per call.
+    let partials: Vec<NormalEquations> = points.par_chunks(chunk).map(run).collect();
+    partials
+        .iter()
+        .fold(NormalEquations::default(), |acc, p| acc.merged(p))
 }
 
 /// Below this many points a call runs on the calling thread: the coarse levels (≈ 1–5 k points,
@@ -751,6 +756,46 @@ mod tests {
         let dispatched = accumulate_chunk_dispatch(&points, target.samples, &kc);
         assert_eq!(baseline, dispatched);
         assert!(baseline.inliers > points.len() / 2);
+    }
+
+    /// The sum over tasks is formed in point order whatever the pool size, so the estimate (and
+    /// `occmask process`'s output bytes) do not depend on how many threads run it: bit-identical
+    /// to the one-thread sum in pools of 1 to 7 threads, with tasks stolen at random. Every
+    /// other task's points are pushed a million times further along their rays (same pixels,
+    /// translation Jacobians 10⁶ smaller, H entries 10¹² smaller), so the partial sums span
+    /// more than f64's 53 bits and a different grouping of the tasks would change the result.
+    #[test]
+    fn parallel_kernel_is_bit_identical_for_any_thread_count() {
+        let pyr = smooth_level();
+        let target = view(&pyr);
+        let row_width = 16;
+        let mut points = points_of(&pyr);
+        for (i, task) in points.chunks_mut(ROWS_PER_TASK * row_width).enumerate() {
+            if i % 2 == 1 {
+                for p in task {
+                    p.point_m = p.point_m.map(|c| c * 1e6);
+                }
+            }
+        }
+        assert!(points.len() >= 2 * MIN_POINTS_FOR_PARALLEL, "{}", points.len());
+        let t = se3_exp(&Twist::new(0.02, -0.01, 0.03, 0.01, -0.02, 0.005));
+        // Width 16: 128-point tasks, 150 of them, so the splits differ between pool sizes.
+        let kc = KernelConstants::new(&target, &t, &COST);
+        let one_by_one = points
+            .chunks(ROWS_PER_TASK * row_width)
+            .fold(NormalEquations::default(), |acc, c| {
+                acc.merged(&accumulate_chunk_dispatch(c, target.samples, &kc))
+            });
+        for threads in 1..=7 {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for _ in 0..3 {
+                let ne = pool.install(|| accumulate_normal_equations(&points, row_width, &target, &t, &COST));
+                assert_eq!(ne, one_by_one, "{threads} threads");
+            }
+        }
     }
 
     #[test]
