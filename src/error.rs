@@ -110,6 +110,15 @@ pub enum Error {
         /// Items planned.
         total: usize,
     },
+
+    /// The operating system refused to start worker threads.
+    #[error("cannot start a pool of {threads} worker thread(s): {message}")]
+    ThreadPool {
+        /// Threads asked for.
+        threads: usize,
+        /// The reason given.
+        message: String,
+    },
 }
 
 impl Error {

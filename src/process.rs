@@ -44,6 +44,7 @@ use crate::pipeline::{FrameInput, PoseFallback, PoseSource, Processor, Processor
 use crate::time::split_ns;
 use crate::trajectory::{interpolate, StampedPose};
 
+pub mod batch;
 mod queue;
 use queue::{byte_queue, ByteReceiver, ByteSender};
 

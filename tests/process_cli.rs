@@ -168,6 +168,75 @@ fn exports_are_written_and_output_bytes_are_deterministic() {
 }
 
 #[test]
+fn per_file_thread_pools_do_not_change_the_output_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Protobuf);
+    let b = fixture(dir.path(), "b.mcap", Flavor::Ros2);
+    let mut outputs = Vec::new();
+    // Two files side by side with one compute thread each, then one after the other with three.
+    for (name, jobs, threads, says) in [
+        (
+            "par",
+            "2",
+            "1",
+            "2 file(s), 2 at a time, 1 compute thread(s) each",
+        ),
+        (
+            "seq",
+            "1",
+            "3",
+            "2 file(s), 1 at a time, 3 compute thread(s) each",
+        ),
+    ] {
+        let out_dir = dir.path().join(name);
+        std::fs::create_dir(&out_dir).unwrap();
+        let out = occmask(&[
+            "process".as_ref(),
+            a.as_os_str(),
+            b.as_os_str(),
+            "--out-dir".as_ref(),
+            out_dir.as_os_str(),
+            "--jobs".as_ref(),
+            jobs.as_ref(),
+            "--threads-per-file".as_ref(),
+            threads.as_ref(),
+        ]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(0), "{err}");
+        assert!(err.contains(says), "{err}");
+        // The summary table lists both files with their frame counts.
+        for file in ["a.mcap", "b.mcap"] {
+            let row = err
+                .lines()
+                .find(|l| l.starts_with(file))
+                .unwrap_or_else(|| panic!("{err}"));
+            assert_eq!(row.split_whitespace().nth(1), Some("8"), "{row}");
+        }
+        outputs.push(["a.occmask.mcap", "b.occmask.mcap"].map(|f| std::fs::read(out_dir.join(f)).unwrap()));
+    }
+    assert!(
+        outputs[0][0] == outputs[1][0],
+        "a differs between the thread splits"
+    );
+    assert!(
+        outputs[0][1] == outputs[1][1],
+        "b differs between the thread splits"
+    );
+    for flag in ["--jobs", "--threads-per-file"] {
+        let out = occmask(&[
+            "process".as_ref(),
+            a.as_os_str(),
+            "--out-dir".as_ref(),
+            dir.path().as_os_str(),
+            flag.as_ref(),
+            "0".as_ref(),
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+        assert!(stderr(&out).contains(">= 1"), "{}", stderr(&out));
+    }
+}
+
+#[test]
 fn external_poses_give_zero_odometry_error() {
     let dir = tempfile::tempdir().unwrap();
     let a = fixture(dir.path(), "a.mcap", Flavor::Ros2);

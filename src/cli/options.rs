@@ -79,6 +79,14 @@ pub fn parse_non_negative(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A whole number >= 1 (counts of files or threads).
+pub fn parse_at_least_one(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(v) if v >= 1 => Ok(v),
+        _ => Err(format!("expected a whole number >= 1, found {text:?}")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -125,5 +133,8 @@ mod tests {
         assert_eq!(parse_non_negative("0"), Ok(0.0));
         assert!(parse_non_negative("-1").is_err() && parse_non_negative("inf").is_err());
         assert!(parse_camera_arg("fr2").is_ok() && parse_camera_arg("banana").is_err());
+        assert_eq!(parse_at_least_one("3"), Ok(3));
+        assert!(parse_at_least_one("0").is_err() && parse_at_least_one("-1").is_err());
+        assert!(parse_at_least_one("1.5").is_err());
     }
 }

@@ -4,13 +4,11 @@
 use std::io::{BufWriter, Write};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context};
 use clap::{Args as ClapArgs, ValueEnum};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
-use rayon::prelude::*;
 
 use occmask::dataset;
 use occmask::image_buf::Mask;
@@ -18,6 +16,7 @@ use occmask::mcap_io::annotate::AnnotateOptions;
 use occmask::mcap_io::input::detect::TopicOverrides;
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::AtomicOutput;
+use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::{
     process_file, PoseMode, ProcessConfig, ProcessHooks, ProcessReport, DEFAULT_MAX_POSE_GAP_NS,
     DEFAULT_PAIR_TOLERANCE_NS,
@@ -25,7 +24,7 @@ use occmask::process::{
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
 
-use super::options::{parse_camera_arg, parse_non_negative, parse_positive, WriteArgs};
+use super::options::{parse_at_least_one, parse_camera_arg, parse_non_negative, parse_positive, WriteArgs};
 use super::{Globals, Outcome};
 
 const AFTER_HELP: &str = "\
@@ -137,9 +136,16 @@ pub struct ProcessArgs {
     #[arg(short, long)]
     pub force: bool,
 
-    /// Files processed at the same time (default: the number of cores).
-    #[arg(short, long)]
+    /// Files processed at the same time (default: the number of cores, at most the number of
+    /// inputs). More than the cores only time-slices them.
+    #[arg(short, long, value_parser = parse_at_least_one)]
     pub jobs: Option<usize>,
+
+    /// Compute threads of each file's pipeline (default: the cores split between the files in
+    /// flight, so one file uses every core and, with as many files as cores, each file runs
+    /// sequentially on its own core). Reading and writing run on their own threads besides.
+    #[arg(long, value_parser = parse_at_least_one)]
+    pub threads_per_file: Option<usize>,
 
     /// Compression and chunking of the output.
     #[command(flatten)]
@@ -447,38 +453,31 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         }
     }
 
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.jobs.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")?;
-    let results = Mutex::new(Vec::new());
-    pool.install(|| {
-        jobs.par_iter().zip(&bars).for_each(|(job, bar)| {
-            let start = Instant::now();
-            let outcome = run_one(job, &args, &config, &all_inputs, bar, &total)
-                .map(|r| (r, start.elapsed().as_secs_f64()))
-                .map_err(|e| format!("{e:#}"));
-            match &outcome {
-                Ok(_) => bar.finish_with_message("done"),
-                Err(_) => bar.abandon_with_message("FAILED"),
-            }
-            if let Ok(mut r) = results.lock() {
-                r.push(JobResult {
-                    input: job.input.clone(),
-                    outcome,
-                });
-            }
-        });
-    });
+    // Each file in flight runs its pipeline on a rayon pool of its own share of the cores
+    // (issue 5: "rayon across files, each file sequential inside" once there are as many files
+    // as cores); the output bytes do not depend on the split.
+    let budget = ThreadBudget::new(available_cores(), jobs.len(), args.jobs, args.threads_per_file)
+        .context("--jobs/--threads-per-file")?;
+    let results = run_batch(jobs.len(), &budget, |i| {
+        let (job, bar) = (&jobs[i], &bars[i]);
+        let start = Instant::now();
+        let outcome = run_one(job, &args, &config, &all_inputs, bar, &total)
+            .map(|r| (r, start.elapsed().as_secs_f64()))
+            .map_err(|e| format!("{e:#}"));
+        match &outcome {
+            Ok(_) => bar.finish_with_message("done"),
+            Err(_) => bar.abandon_with_message("FAILED"),
+        }
+        JobResult {
+            input: job.input.clone(),
+            outcome,
+        }
+    })?;
     total.finish();
-    let mut results = results
-        .into_inner()
-        .map_err(|_| anyhow!("a worker thread panicked"))?;
-    results.sort_by_key(|r| args.inputs.iter().position(|i| *i == r.input));
 
     let failed = results.iter().filter(|r| r.outcome.is_err()).count();
     if !globals.quiet {
-        print_summary(&results, &jobs);
+        print_summary(&results, &jobs, &budget);
         if args.timings {
             print_timings(&results);
         }
@@ -591,8 +590,16 @@ fn print_timings(results: &[JobResult]) {
     }
 }
 
-fn print_summary(results: &[JobResult], jobs: &[Job]) {
+fn print_summary(results: &[JobResult], jobs: &[Job], budget: &ThreadBudget) {
     let mut out = std::io::stderr().lock();
+    let _ = writeln!(
+        out,
+        "{} file(s), {} at a time, {} compute thread(s) each ({} cores)",
+        results.len(),
+        budget.files_in_flight(),
+        budget.threads_per_file_text(),
+        available_cores()
+    );
     let _ = writeln!(
         out,
         "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7} {:>7}  output",

@@ -1,0 +1,96 @@
+//! Several files at once with per-file compute pools (`process::batch`): the output bytes of
+//! every file are identical to a sequential one-thread run, whatever the split of the cores,
+//! on real VGA frames (`../shared/data/tum_fr2_desk_50`, where DVO's finest levels have enough
+//! points for its parallel reduction and the detector's rows split into many tasks).
+
+#![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use occmask::convert::{convert_sequence, resolve_intrinsics, ConvertConfig, DEFAULT_BATCH_EVENTS};
+use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
+use occmask::mcap_io::input::McapInput;
+use occmask::mcap_io::McapWriteOptions;
+use occmask::process::batch::{run_batch, ThreadBudget};
+use occmask::process::{pipeline_factory, process_file, NoHooks, PoseMode, ProcessConfig};
+
+/// About 12 frames at 30 Hz (TUM's stamps are not exactly periodic): enough for DVO, the detector's accumulation and its prediction to act.
+const DURATION_NS: u64 = 400_000_000;
+
+fn desk_mcap(dir: &Path) -> PathBuf {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/tum_fr2_desk_50");
+    let seq = dataset::tum::load(&root, DatasetKind::Tum).unwrap_or_else(|e| {
+        panic!("this test needs ../shared/data/tum_fr2_desk_50 beside the repository: {e}")
+    });
+    let config = ConvertConfig {
+        intrinsics: resolve_intrinsics(DatasetKind::Tum, &seq.name, None).unwrap(),
+        depth_units_per_meter: dataset::TUM_DEPTH_UNITS_PER_METER,
+        max_pair_gap_ns: DEFAULT_MAX_PAIR_GAP_NS,
+        keep_unpaired: false,
+        write: McapWriteOptions::default(),
+        batch_events: DEFAULT_BATCH_EVENTS,
+        command_line: "test".into(),
+    };
+    let (cursor, _) = convert_sequence(&seq, &config, Cursor::new(Vec::new()), &mut |_, _| {
+        std::ops::ControlFlow::Continue(())
+    })
+    .unwrap();
+    let path = dir.join("desk.mcap");
+    std::fs::write(&path, cursor.into_inner()).unwrap();
+    path
+}
+
+fn process(path: &Path, mode: PoseMode) -> (Vec<u8>, u64) {
+    let input = McapInput::open(path).unwrap();
+    let config = ProcessConfig {
+        pose_mode: mode,
+        end_offset_ns: Some(DURATION_NS),
+        ..ProcessConfig::default()
+    };
+    let (cursor, report) = process_file(
+        &input,
+        Cursor::new(Vec::new()),
+        &config,
+        &mut pipeline_factory(false),
+        &mut NoHooks,
+    )
+    .unwrap();
+    (cursor.into_inner(), report.frames)
+}
+
+#[test]
+fn files_processed_concurrently_in_their_own_pools_match_sequential_one_thread_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = desk_mcap(dir.path());
+    let modes = [PoseMode::Dvo, PoseMode::DvoUnmasked];
+    // The sequential reference: one file at a time on one thread.
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let reference: Vec<(Vec<u8>, u64)> = modes
+        .iter()
+        .map(|&mode| one_thread.install(|| process(&path, mode)))
+        .collect();
+    for (bytes, frames) in &reference {
+        assert!((11..=14).contains(frames), "{frames} frames");
+        assert!(bytes.len() > 1 << 20);
+    }
+    assert!(
+        reference[0].0 != reference[1].0,
+        "the two modes must differ for the test to mean anything"
+    );
+    // Two files at a time with one thread each (the default on 2 cores), with 2 threads each
+    // (the default on 4 cores), with uneven slots (2 and 1 threads on 3 cores), and one file at
+    // a time with 3 threads.
+    for (cores, jobs) in [(2, None), (4, None), (3, None), (3, Some(1))] {
+        let budget = ThreadBudget::new(cores, 2, jobs, None).unwrap();
+        let outputs = run_batch(2, &budget, |i| process(&path, modes[i])).unwrap();
+        for (i, (bytes, frames)) in outputs.iter().enumerate() {
+            assert_eq!(*frames, reference[i].1);
+            assert!(
+                *bytes == reference[i].0,
+                "file {i} ({:?}) differs from the one-thread run with {budget:?}",
+                modes[i]
+            );
+        }
+    }
+}
