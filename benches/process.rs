@@ -1,9 +1,12 @@
 //! End-to-end `process` throughput, MCAP in → MCAP out with DVO (closed loop) + detector at
-//! 640×480, on ../shared/data/tum_fr2_desk_50 converted to MCAP in memory first: one file, and
-//! two files in parallel (rayon across files, as `occmask process a b` does) to show scaling.
+//! 640×480, on ../shared/data/tum_fr2_desk_50 converted to MCAP in memory first, through the
+//! same batch runner as `occmask process a b …` (`process::batch`: each file in flight on its
+//! own rayon pool with its share of the cores): one file with all cores and with one thread,
+//! two files one after the other and side by side, four files side by side.
 //!
-//! `cargo bench --bench process`; throughput is in frames (elements/s = frames per second).
-//! tools/bench_process.sh measures the binary end to end on a generated ≥ 2 GB file (peak RSS).
+//! `cargo bench --bench process`; throughput is in frames (elements/s = total frames per
+//! second). tools/bench_process.sh measures the binary end to end (scaling table on longer
+//! files, CPU per frame, peak RSS on a generated ≥ 2 GB file).
 
 use std::io::{Cursor, Write};
 use std::path::PathBuf;
@@ -13,6 +16,7 @@ use occmask::convert::{convert_sequence, resolve_intrinsics, ConvertConfig, DEFA
 use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::McapWriteOptions;
+use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::{pipeline_factory, process_file, NoHooks, ProcessConfig};
 
 /// Criterion's minimum sample count: one iteration processes 50 VGA frames.
@@ -59,14 +63,24 @@ fn bench_process(c: &mut Criterion) {
     let input = McapInput::open(&path).expect("open");
     let frames = process_once(&input);
 
+    let cores = available_cores();
     let mut group = c.benchmark_group("process_tum_fr2_desk_50");
     group.sample_size(SAMPLES);
-    group.throughput(Throughput::Elements(frames));
-    group.bench_function("one_file", |b| b.iter(|| process_once(&input)));
-    group.throughput(Throughput::Elements(2 * frames));
-    group.bench_function("two_files_parallel", |b| {
-        b.iter(|| rayon::join(|| process_once(&input), || process_once(&input)))
-    });
+    // name, files, --jobs, --threads-per-file (None = the default split of the cores)
+    let cases: [(&str, usize, Option<usize>, Option<usize>); 5] = [
+        ("one_file", 1, None, None),
+        ("one_file_one_thread", 1, None, Some(1)),
+        ("two_files_one_after_the_other", 2, Some(1), None),
+        ("two_files_side_by_side", 2, None, None),
+        ("four_files_side_by_side", 4, None, None),
+    ];
+    for (name, files, jobs, threads) in cases {
+        let budget = ThreadBudget::new(cores, files, jobs, threads).expect("valid budget");
+        group.throughput(Throughput::Elements(files as u64 * frames));
+        group.bench_function(name, |b| {
+            b.iter(|| run_batch(files, &budget, |_| process_once(&input)).expect("thread pools"))
+        });
+    }
     group.finish();
 }
 
