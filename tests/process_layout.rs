@@ -1,15 +1,28 @@
 //! The Foxglove layout in the repository: valid JSON, every panel of the tree configured, and
-//! every topic it shows is one that `convert` or `process` writes.
+//! every topic it shows is one that `convert` or `process` writes; and `process` outputs that
+//! Foxglove's MCAP reader opens with the right timeline.
+//!
+//! The deeper check, reading a processed file with Foxglove's own libraries and checking what
+//! each panel of the layout needs, is tools/foxglove_check (node); screenshots of the layout in
+//! Foxglove Studio are in foxglove/screenshots/.
 
 #![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
 
+mod process_support;
+
+use std::io::Cursor;
+
 use occmask::mcap_io::annotate::{
-    TOPIC_MASK, TOPIC_MASK_ANNOTATIONS, TOPIC_ODOMETRY, TOPIC_PATH, TOPIC_STATS,
+    AnnotateOptions, METADATA_PROCESS, TOPIC_MASK, TOPIC_MASK_ANNOTATIONS, TOPIC_ODOMETRY, TOPIC_PATH,
+    TOPIC_STATS,
 };
+use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::{
     TOPIC_COLOR_CAMERA_INFO, TOPIC_COLOR_IMAGE, TOPIC_DEPTH_CAMERA_INFO, TOPIC_DEPTH_IMAGE,
     TOPIC_GROUNDTRUTH_POSE, TOPIC_TF,
 };
+use occmask::process::{process_file, NoHooks, ProcessConfig};
+use process_support::{fixture_bytes, test_factory, FixtureSpec, ALL_FLAVORS};
 use serde_json::Value;
 
 fn panel_ids(node: &Value, out: &mut Vec<String>) {
@@ -77,8 +90,68 @@ fn layout_panels_show_topics_we_write() {
             "layout shows unknown topic {topic}"
         );
     }
-    // Depth gets a colour map with a range for TUM units (4 m at 5000 units/m).
+    // Depth gets a colour map with a range for TUM units (6 m at 5000 units/m: the 99th
+    // percentile of valid depth is 5.7 m on tum_fr2_desk_50, 4.6 m in the demo).
     let depth = &configs["Image!occmask-depth"]["imageMode"];
     assert_eq!(depth["colorMap"], "turbo");
-    assert_eq!(depth["maxValue"], 20000);
+    assert_eq!(depth["maxValue"], 30000);
+}
+
+/// Foxglove and Lichtblick take a file's time range from its chunk indexes (the smallest
+/// `message_start_time`, `McapIndexedIterableSource.initialize`), and `@mcap/core` before 2025
+/// (Foxglove Studio 1.x, older Lichtblick) throws "Chunks without message indexes are not
+/// currently supported" on a chunk without messages. A chunk holding only schemas and channels
+/// has times (0, 0): the timeline then starts in 1970 and the file does not play. `process` used
+/// to close such chunks by writing metadata before the first message.
+#[test]
+fn process_outputs_have_no_message_less_chunks_and_start_at_the_first_message() {
+    for flavor in ALL_FLAVORS {
+        for copy_input in [true, false] {
+            let input_bytes = fixture_bytes(flavor, &FixtureSpec::default());
+            let dir = tempfile::tempdir().unwrap();
+            let input_path = dir.path().join("in.mcap");
+            std::fs::write(&input_path, &input_bytes).unwrap();
+            let input = McapInput::open(&input_path).unwrap();
+            let config = ProcessConfig {
+                annotate: AnnotateOptions {
+                    copy_input,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            let (sink, _) = process_file(
+                &input,
+                Cursor::new(Vec::new()),
+                &config,
+                &mut test_factory,
+                &mut NoHooks,
+            )
+            .unwrap();
+            let out = sink.into_inner();
+            let summary = mcap::Summary::read(&out).unwrap().unwrap();
+            let stats = summary.stats.as_ref().unwrap();
+            let case = format!("{flavor:?}, copy_input {copy_input}");
+            assert!(!summary.chunk_indexes.is_empty(), "{case}");
+            for chunk in &summary.chunk_indexes {
+                assert!(
+                    !chunk.message_index_offsets.is_empty() && chunk.message_index_length > 0,
+                    "{case}: chunk at {} holds no message",
+                    chunk.chunk_start_offset
+                );
+            }
+            let timeline_start = summary.chunk_indexes.iter().map(|c| c.message_start_time).min();
+            let timeline_end = summary.chunk_indexes.iter().map(|c| c.message_end_time).max();
+            assert_eq!(timeline_start, Some(stats.message_start_time), "{case}");
+            assert_eq!(timeline_end, Some(stats.message_end_time), "{case}");
+            // The metadata (and, in a copy, the input's attachment) are still all there.
+            let names: Vec<&str> = summary.metadata_indexes.iter().map(|i| i.name.as_str()).collect();
+            assert!(names.contains(&METADATA_PROCESS), "{case}: {names:?}");
+            assert_eq!(names.contains(&"recording"), copy_input, "{case}: {names:?}");
+            assert_eq!(
+                summary.attachment_indexes.len(),
+                usize::from(copy_input),
+                "{case}"
+            );
+        }
+    }
 }

@@ -3,9 +3,17 @@
 //!
 //! Copy mode registers every input schema and channel under its own ID first
 //! (`add_schema_with_id`/`add_channel_with_id`: registering new channels before them makes
-//! mcap 0.26 panic on ID collisions, ecosystem.md §1.3), copies metadata and attachments,
-//! then the new schemas and channels get the next free IDs. Input messages are written with
-//! their original header (channel, sequence, log and publish time) and bytes.
+//! mcap 0.26 panic on ID collisions, ecosystem.md §1.3), then the new schemas and channels get
+//! the next free IDs. Input messages are written with their original header (channel,
+//! sequence, log and publish time) and bytes.
+//!
+//! Metadata and attachments (the input's and our own) are held back and written after the
+//! last message, in [`AnnotatedWriter::finish`]: mcap 0.26 closes the open chunk before each
+//! metadata or attachment record, so writing them up front left chunks holding only schemas
+//! and channels, with no message index. Foxglove's and Lichtblick's MCAP reader (`@mcap/core`
+//! `McapIndexedReader`) refuses such a chunk ("Chunks without message indexes are not
+//! currently supported") whenever its (0, 0) time range overlaps the playback range, i.e. for
+//! every file whose messages start at log time 0, such as `occmask demo`'s.
 //!
 //! New channels (all protobuf Foxglove schemas except the stats):
 //!
@@ -197,6 +205,9 @@ pub struct AnnotatedWriter<W: Write + Seek> {
     copied_messages: u64,
     new_messages: u64,
     scratch: Vec<u8>,
+    /// Metadata and attachments written by [`Self::finish`], after the last message (see the
+    /// module documentation for why not earlier).
+    deferred: Vec<ExtraRecord>,
 }
 
 /// The transform topic to write for `input`: `/tf` unless the input has a `/tf` channel with
@@ -244,6 +255,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
             .chunk_size(Some(options.write.chunk_size_bytes))
             .compression_threads(options.write.compression_threads)
             .create(sink)?;
+        let mut deferred = Vec::new();
         if options.copy_input {
             for s in input.schemas().values() {
                 writer.add_schema_with_id(s.id, &s.name, &s.encoding, &s.data)?;
@@ -251,24 +263,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
             for c in input.channels().values() {
                 writer.add_channel_with_id(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
             }
-            for extra in input.extras()? {
-                match extra {
-                    ExtraRecord::Metadata(m) => writer.write_metadata(&m)?,
-                    ExtraRecord::Attachment {
-                        log_time,
-                        create_time,
-                        name,
-                        media_type,
-                        data,
-                    } => writer.attach(&mcap::Attachment {
-                        log_time,
-                        create_time,
-                        name,
-                        media_type,
-                        data: std::borrow::Cow::Owned(data),
-                    })?,
-                }
-            }
+            deferred = input.extras()?;
         }
         let mut add = |topic: &str, schema: foxglove::Schema| -> Result<u16> {
             let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
@@ -314,6 +309,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
             copied_messages: 0,
             new_messages: 0,
             scratch: Vec::new(),
+            deferred,
         })
     }
 
@@ -453,15 +449,15 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
         Ok(())
     }
 
-    /// Writes a metadata record.
+    /// Adds a metadata record; it is written by [`Self::finish`], after the last message.
     ///
     /// # Errors
-    /// [`Error::Mcap`] on write failure.
+    /// None today; kept fallible so callers need not change if it writes at once again.
     pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
-        self.writer.write_metadata(&mcap::records::Metadata {
+        self.deferred.push(ExtraRecord::Metadata(mcap::records::Metadata {
             name: name.into(),
             metadata,
-        })?;
+        }));
         Ok(())
     }
 
@@ -475,11 +471,30 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
         self.new_messages
     }
 
-    /// Writes the summary and footer and returns the sink.
+    /// Writes the held-back metadata and attachments (input's first, then ours), the summary
+    /// and the footer, and returns the sink.
     ///
     /// # Errors
-    /// [`Error::Mcap`] when the summary or footer cannot be written.
+    /// [`Error::Mcap`] when a record, the summary or the footer cannot be written.
     pub fn finish(mut self) -> Result<W> {
+        for extra in std::mem::take(&mut self.deferred) {
+            match extra {
+                ExtraRecord::Metadata(m) => self.writer.write_metadata(&m)?,
+                ExtraRecord::Attachment {
+                    log_time,
+                    create_time,
+                    name,
+                    media_type,
+                    data,
+                } => self.writer.attach(&mcap::Attachment {
+                    log_time,
+                    create_time,
+                    name,
+                    media_type,
+                    data: std::borrow::Cow::Owned(data),
+                })?,
+            }
+        }
         self.writer.finish()?;
         Ok(self.writer.into_inner())
     }
