@@ -19,7 +19,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::image_buf::{ImageSize, Mask, MASK_SET};
 use crate::mcap_io::annotate::{TOPIC_MASK, TOPIC_ODOMETRY};
-use crate::mcap_io::input::decode::{decode_image, decode_poses, ImagePayload};
+use crate::mcap_io::input::decode::{decode_image, read_poses, ImagePayload};
 use crate::mcap_io::input::{McapInput, Truncation};
 use crate::mcap_io::{TOPIC_GROUNDTRUTH_MASK, TOPIC_GROUNDTRUTH_POSE};
 use crate::metrics::segmentation::{SegmentationSummary, SegmentationTally};
@@ -131,31 +131,6 @@ fn mask_from_message(input: &McapInput, channel_id: u16, data: &[u8]) -> Result<
     }
     let mask = Mask::from_fn(size, |x, y| if data[y * step + x] != 0 { MASK_SET } else { 0 });
     Ok((msg.timestamp_ns, mask))
-}
-
-fn read_poses(input: &McapInput, topic: &str) -> Result<Vec<StampedPose>> {
-    let Some(channel) = input.channel_by_topic(topic) else {
-        return Ok(Vec::new());
-    };
-    let Some(ct) = channel.channel_type.filter(|ct| ct.is_pose()) else {
-        return Err(Error::Decode {
-            topic: topic.into(),
-            message: format!("expected a pose schema, found {:?}", channel.schema_name),
-        });
-    };
-    let mut poses = Vec::new();
-    input.for_each_message(Some(&[topic.to_owned()]), None, |m| {
-        for s in decode_poses(ct, topic, &m.data)? {
-            poses.push(StampedPose {
-                timestamp_ns: s.timestamp_ns,
-                world_from_camera: s.parent_from_child,
-            });
-        }
-        Ok(true)
-    })?;
-    poses.sort_by_key(|p| p.timestamp_ns);
-    poses.dedup_by_key(|p| p.timestamp_ns);
-    Ok(poses)
 }
 
 fn rpe_report(delta_frames: usize, s: &RpeStats) -> RpeReport {

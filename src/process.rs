@@ -32,16 +32,16 @@ use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
 use crate::mcap_io::annotate::{
     moving_pixels, AnnotateOptions, AnnotatedWriter, FrameAnnotation, FrameStatsMsg, JsonTime,
-    METADATA_PROCESS,
+    METADATA_ODOMETRY_ANCHOR, METADATA_PROCESS,
 };
 use crate::mcap_io::input::decode::{
-    decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
+    decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into, read_poses,
 };
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
 use crate::mcap_io::input::{McapInput, RawMessage, Truncation};
 use crate::mcap_io::DEPTH_UNITS_KEY;
 use crate::pipeline::{FrameInput, PoseFallback, PoseSource, Processor, ProcessorConfig};
-use crate::time::split_ns;
+use crate::time::{format_ns_as_seconds, split_ns};
 use crate::trajectory::{interpolate, StampedPose};
 
 pub mod batch;
@@ -156,6 +156,31 @@ pub const MAX_QUEUED_IMAGES: usize = 64;
 /// REP 118 for `16UC1`).
 pub const DEFAULT_DEPTH_UNITS_PER_METER: f64 = 1000.0;
 
+/// Which frame the estimated trajectory (`/occmask/odometry`, `/tf`, `/occmask/path`, the
+/// exported trajectory) is expressed in, for the DVO pose modes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum OdometryAnchor {
+    /// `world` is the first processed camera (its pose is the identity).
+    FirstCamera,
+    /// The frame of this pose channel when the file has it (default: `/groundtruth/pose`): the
+    /// first estimated pose is set to the channel's pose at the first frame (interpolated), so
+    /// the estimated and ground-truth cameras start together in Foxglove's 3D panel and `world`
+    /// means one frame in the whole file. Without the channel, or without a pose within
+    /// Without the channel (or with no poses on it), as [`OdometryAnchor::FirstCamera`]; with
+    /// poses but none within [`ProcessConfig::max_pose_gap_ns`] of the first frame, an error
+    /// that names `--no-anchor`.
+    IfPresent(String),
+    /// Like [`OdometryAnchor::IfPresent`], but a missing channel is an error too
+    /// (`--anchor-topic`).
+    Required(String),
+}
+
+impl Default for OdometryAnchor {
+    fn default() -> Self {
+        OdometryAnchor::IfPresent(crate::mcap_io::TOPIC_GROUNDTRUTH_POSE.to_owned())
+    }
+}
+
 /// Options of [`process_file`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProcessConfig {
@@ -174,6 +199,8 @@ pub struct ProcessConfig {
     pub pair_tolerance_ns: u64,
     /// Max gap between external poses around a frame.
     pub max_pose_gap_ns: u64,
+    /// The frame of the estimated trajectory (DVO pose modes; external poses keep their own).
+    pub anchor: OdometryAnchor,
     /// Only frames with colour stamps at or after this many ns after the first colour image.
     pub start_offset_ns: Option<u64>,
     /// Only frames before this many ns after the first colour image.
@@ -195,6 +222,7 @@ impl Default for ProcessConfig {
             pose_child_frame: None,
             pair_tolerance_ns: DEFAULT_PAIR_TOLERANCE_NS,
             max_pose_gap_ns: DEFAULT_MAX_POSE_GAP_NS,
+            anchor: OdometryAnchor::default(),
             start_offset_ns: None,
             end_offset_ns: None,
             timings: false,
@@ -603,6 +631,67 @@ fn load_external_poses(
     Ok(poses)
 }
 
+/// The poses of the [`OdometryAnchor`] channel, with its topic; `None` when not anchoring.
+fn load_anchor_poses(
+    input: &McapInput,
+    config: &ProcessConfig,
+) -> Result<Option<(String, Vec<StampedPose>)>> {
+    if config.pose_mode == PoseMode::External {
+        return Ok(None); // external poses are already in their own world frame
+    }
+    let (topic, required) = match &config.anchor {
+        OdometryAnchor::FirstCamera => return Ok(None),
+        OdometryAnchor::IfPresent(t) => (t, false),
+        OdometryAnchor::Required(t) => (t, true),
+    };
+    let poses = read_poses(input, topic).map_err(|e| match e {
+        Error::Decode { topic, message } => Error::Decode {
+            topic,
+            message: format!("{message} (anchor poses: pass --no-anchor to ignore the channel)"),
+        },
+        other => other,
+    })?;
+    match (poses.is_empty(), required) {
+        (false, _) => Ok(Some((topic.clone(), poses))),
+        (true, false) => Ok(None),
+        (true, true) => Err(Error::Dataset {
+            path: input.path().to_owned(),
+            message: format!(
+                "--anchor-topic {topic}: no poses in the file (channels: {})",
+                input
+                    .channels()
+                    .values()
+                    .map(|c| c.topic.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }),
+    }
+}
+
+/// `world_from_odometry` for the whole file, from the first processed frame: the anchor pose
+/// at that frame times the inverse of the processor's pose there; identity without an anchor.
+fn anchor_at_first_frame(
+    ctx: &FrameContext<'_>,
+    stamp: u64,
+    odometry_from_camera: &Isometry3<f64>,
+) -> Result<Isometry3<f64>> {
+    let Some((topic, poses)) = ctx.anchor_poses else {
+        return Ok(Isometry3::identity());
+    };
+    let world_from_camera =
+        interpolate(poses, stamp, ctx.config.max_pose_gap_ns).ok_or_else(|| Error::Decode {
+            topic: topic.to_owned(),
+            message: format!(
+                "no anchor pose within {} ms of the first frame ({} s), so the odometry cannot \
+                 start in this channel's frame; pass --no-anchor to use the first camera as world",
+                ctx.config.max_pose_gap_ns / 1_000_000,
+                format_ns_as_seconds(stamp, 6)
+            ),
+        })?;
+    Ok(world_from_camera * odometry_from_camera.inverse())
+}
+
 /// Processes one input file into `sink`; see the module documentation.
 ///
 /// # Errors
@@ -666,6 +755,7 @@ pub fn process_file<W: Write + Seek + Send>(
     } else {
         Vec::new()
     };
+    let anchor_poses = load_anchor_poses(input, config)?;
 
     let mut writer = AnnotatedWriter::new(sink, input, &config.annotate)?;
     let mut metadata = BTreeMap::from([
@@ -682,6 +772,9 @@ pub fn process_file<W: Write + Seek + Send>(
         ),
         (DEPTH_UNITS_KEY.to_owned(), depth_units_per_meter.to_string()),
     ]);
+    if let Some((topic, _)) = &anchor_poses {
+        metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), topic.clone());
+    }
     if let Some(t) = input.truncation() {
         // Recorded only for damaged inputs, so complete inputs keep their exact bytes.
         metadata.extend(truncation_metadata(t));
@@ -722,6 +815,7 @@ pub fn process_file<W: Write + Seek + Send>(
         depth_m: DepthMeters::filled(ImageSize::new(0, 0), 0.0),
         recycle: (gray_tx, depth_tx),
         processor: None,
+        world_from_odometry: None,
         frame_size: None,
         first_color_ns: None,
         report: ProcessReport {
@@ -750,6 +844,7 @@ pub fn process_file<W: Write + Seek + Send>(
         intrinsics,
         calibration_size,
         external_poses: &external_poses,
+        anchor_poses: anchor_poses.as_ref().map(|(t, p)| (t.as_str(), p.as_slice())),
     };
     // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
     // pipeline and writes: decoding then overlaps with processing.
@@ -886,6 +981,8 @@ struct FrameContext<'a> {
     intrinsics: PinholeIntrinsics,
     calibration_size: Option<ImageSize>,
     external_poses: &'a [StampedPose],
+    /// [`OdometryAnchor`]: the channel and its poses, when the trajectory is anchored.
+    anchor_poses: Option<(&'a str, &'a [StampedPose])>,
 }
 
 struct FrameLoop {
@@ -894,6 +991,9 @@ struct FrameLoop {
     gray: GrayF32,
     depth_m: DepthMeters,
     processor: Option<Box<dyn FrameProcessor>>,
+    /// Maps the processor's `world` (its first camera) into the output's `world`; set at the
+    /// first processed frame ([`OdometryAnchor`]).
+    world_from_odometry: Option<Isometry3<f64>>,
     frame_size: Option<ImageSize>,
     first_color_ns: Option<u64>,
     report: ProcessReport,
@@ -1053,9 +1153,17 @@ impl FrameLoop {
             decode_ms: finite_or_zero(decode_ms),
             process_ms: finite_or_zero(process_ms),
         };
+        let world_from_odometry = match self.world_from_odometry {
+            Some(w) => w,
+            None => *self.world_from_odometry.insert(anchor_at_first_frame(
+                ctx,
+                stamp,
+                &result.world_from_camera,
+            )?),
+        };
         let pose = StampedPose {
             timestamp_ns: stamp,
-            world_from_camera: result.world_from_camera,
+            world_from_camera: world_from_odometry * result.world_from_camera,
         };
         hooks.frame_done(&pose, &result.mask)?;
         output.send(WriteOp::Frame(Box::new(FrameWrite {
@@ -1063,7 +1171,7 @@ impl FrameLoop {
             timestamp_ns: stamp,
             frame_id: color.frame_id,
             mask: result.mask,
-            world_from_camera: result.world_from_camera,
+            world_from_camera: pose.world_from_camera,
             accumulation: result.accumulation,
             stats,
         })))?;

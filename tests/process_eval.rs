@@ -118,3 +118,78 @@ fn wrong_poses_give_nonzero_errors_and_the_cli_prints_them() {
     assert_eq!(failed.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&failed.stderr).contains("occmask process"));
 }
+
+#[test]
+fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
+    use occmask::mcap_io::annotate::TOPIC_ODOMETRY;
+    use occmask::mcap_io::input::decode::read_poses;
+    use occmask::process::OdometryAnchor;
+    use occmask::trajectory::{interpolate, StampedPose};
+
+    let dir = tempfile::tempdir().unwrap();
+    let read = |path: &Path, topic: &str| -> Vec<StampedPose> {
+        read_poses(&McapInput::open(path).unwrap(), topic).unwrap()
+    };
+    let anchored = processed(dir.path(), &ProcessConfig::default(), "anchored");
+    let unanchored = processed(
+        dir.path(),
+        &ProcessConfig {
+            anchor: OdometryAnchor::FirstCamera,
+            ..Default::default()
+        },
+        "first_camera",
+    );
+    let truth = read(&anchored, GT_TOPIC);
+    let (a, f) = (read(&anchored, TOPIC_ODOMETRY), read(&unanchored, TOPIC_ODOMETRY));
+    assert_eq!((a.len(), f.len()), (12, 12));
+    let truth_0 = interpolate(&truth, a[0].timestamp_ns, u64::MAX).unwrap();
+    let close = |x: &nalgebra::Isometry3<f64>, y: &nalgebra::Isometry3<f64>| {
+        let d = x.inverse() * y;
+        d.translation.vector.norm() < 1e-9 && d.rotation.angle() < 1e-9
+    };
+    // The test processor's own first pose is not the identity, and not the ground truth.
+    assert!(!close(&f[0].world_from_camera, &truth_0));
+    assert!(
+        close(&a[0].world_from_camera, &truth_0),
+        "{:?} vs {truth_0:?}",
+        a[0]
+    );
+    // Anchoring is one constant change of frame: every pose moves with the first.
+    let world_from_odometry = truth_0 * f[0].world_from_camera.inverse();
+    for (ai, fi) in a.iter().zip(&f) {
+        assert_eq!(ai.timestamp_ns, fi.timestamp_ns);
+        assert!(close(
+            &ai.world_from_camera,
+            &(world_from_odometry * fi.world_from_camera)
+        ));
+    }
+    // Relative errors do not depend on the frame.
+    let (ra, rf) = (evaluate(&anchored).unwrap(), evaluate(&unanchored).unwrap());
+    let (oa, of) = (ra.odometry.unwrap(), rf.odometry.unwrap());
+    for (x, y) in oa.rpe.iter().zip(&of.rpe) {
+        assert!(
+            (x.translation_rmse_m - y.translation_rmse_m).abs() < 1e-9,
+            "{x:?} vs {y:?}"
+        );
+    }
+    assert!((oa.ate.unwrap().rmse_m - of.ate.unwrap().rmse_m).abs() < 1e-9);
+
+    // A named anchor channel that the file lacks is an error naming the flag.
+    let input_path = dir.path().join("anchored.in.mcap");
+    let input = McapInput::open(&input_path).unwrap();
+    let config = ProcessConfig {
+        anchor: OdometryAnchor::Required("/mocap/pose".into()),
+        ..Default::default()
+    };
+    let err = process_file(
+        &input,
+        std::io::Cursor::new(Vec::new()),
+        &config,
+        &mut test_factory,
+        &mut NoHooks,
+    )
+    .err()
+    .expect("a missing anchor channel must fail")
+    .to_string();
+    assert!(err.contains("--anchor-topic /mocap/pose"), "{err}");
+}

@@ -18,8 +18,8 @@ use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::AtomicOutput;
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::{
-    process_file, PoseMode, ProcessConfig, ProcessHooks, ProcessReport, DEFAULT_MAX_POSE_GAP_NS,
-    DEFAULT_PAIR_TOLERANCE_NS,
+    process_file, OdometryAnchor, PoseMode, ProcessConfig, ProcessHooks, ProcessReport,
+    DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
 };
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
@@ -77,6 +77,16 @@ pub struct ProcessArgs {
     /// With a transform --pose-topic: the child frame to follow (default: the first one seen).
     #[arg(long, requires = "pose_topic")]
     pub pose_frame: Option<String>,
+
+    /// Start the estimated trajectory at this pose channel's pose at the first frame, so that
+    /// `world` is that channel's frame (default: /groundtruth/pose when the file has it, as
+    /// `occmask convert` writes it; then estimated and ground-truth cameras overlap in Foxglove).
+    #[arg(long, conflicts_with_all = ["no_anchor", "pose_topic"])]
+    pub anchor_topic: Option<String>,
+
+    /// `world` is the first processed camera, even when the file has /groundtruth/pose.
+    #[arg(long)]
+    pub no_anchor: bool,
 
     /// Colour image topic (default: detected by schema).
     #[arg(long)]
@@ -251,6 +261,11 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
         pose_child_frame: args.pose_frame.clone(),
         pair_tolerance_ns: (args.max_pair_gap_ms * 1e6).round() as u64,
         max_pose_gap_ns: DEFAULT_MAX_POSE_GAP_NS,
+        anchor: match (&args.anchor_topic, args.no_anchor) {
+            (Some(topic), _) => OdometryAnchor::Required(topic.clone()),
+            (None, true) => OdometryAnchor::FirstCamera,
+            (None, false) => OdometryAnchor::default(),
+        },
         start_offset_ns: args.start,
         end_offset_ns: args.end,
         timings: args.timings,

@@ -71,6 +71,9 @@ pub const SCHEMA_FRAME_STATS: &str = "occmask.FrameStats";
 pub const FRAME_STATS_JSON_SCHEMA: &str = include_str!("../../schemas/occmask.FrameStats.json");
 /// Name of the metadata record describing the run.
 pub const METADATA_PROCESS: &str = "occmask.process";
+/// Key in [`METADATA_PROCESS`]: the pose channel whose frame `world` is (the odometry starts at
+/// that channel's pose); absent when `world` is the first processed camera.
+pub const METADATA_ODOMETRY_ANCHOR: &str = "odometry_anchor_topic";
 
 /// The path is published at most this often (data time): enough for a live-looking
 /// trajectory without one message per frame.

@@ -750,6 +750,37 @@ pub fn protobuf_bytes<M: prost::Message>(msg: &M) -> Vec<u8> {
     msg.encode_to_vec()
 }
 
+/// Every pose of a pose channel (`PoseInFrame`, `PoseStamped`, transforms: each sample's
+/// `parent_from_child` as `world_from_camera`), sorted by time, one per timestamp; empty when
+/// the file has no channel `topic`.
+///
+/// # Errors
+/// [`Error::Decode`] when the channel's schema is not a pose schema or a message does not decode.
+pub fn read_poses(input: &super::McapInput, topic: &str) -> Result<Vec<crate::trajectory::StampedPose>> {
+    let Some(channel) = input.channel_by_topic(topic) else {
+        return Ok(Vec::new());
+    };
+    let Some(ct) = channel.channel_type.filter(|ct| ct.is_pose()) else {
+        return Err(Error::Decode {
+            topic: topic.into(),
+            message: format!("expected a pose schema, found {:?}", channel.schema_name),
+        });
+    };
+    let mut poses = Vec::new();
+    input.for_each_message(Some(&[topic.to_owned()]), None, |m| {
+        for s in decode_poses(ct, topic, &m.data)? {
+            poses.push(crate::trajectory::StampedPose {
+                timestamp_ns: s.timestamp_ns,
+                world_from_camera: s.parent_from_child,
+            });
+        }
+        Ok(true)
+    })?;
+    poses.sort_by_key(|p| p.timestamp_ns);
+    poses.dedup_by_key(|p| p.timestamp_ns);
+    Ok(poses)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
