@@ -34,7 +34,11 @@ fn run(scenario: Scenario) -> (SegmentationSummary, Vec<FrameCounts>) {
     for i in 0..sequence.len() {
         sequence.render_into(i, &mut frame);
         let mask = detector
-            .update(&frame.depth_m, &sequence.current_from_previous(i))
+            .update_with_gray(
+                &frame.depth_m,
+                Some(&frame.gray),
+                &sequence.current_from_previous(i),
+            )
             .unwrap();
         counts.push(tally.add_masks(mask, &frame.gt_mask).unwrap());
     }
