@@ -31,7 +31,7 @@ use occmask::trajectory::{interpolate, parse_tum_line, StampedPose};
 /// The default config with overrides from the environment (for experiments):
 /// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0
 /// (appearance growth off), OCC_GROWTH_PHOTO, OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS,
-/// OCC_GROWTH_MARGIN (its parameters).
+/// OCC_GROWTH_MARGIN, OCC_GROWTH_RADIUS, OCC_GROWTH_INHERIT=0/1, OCC_GROWTH_SEEDS=0/1 (its parameters).
 fn detector_config() -> OcclusionConfig {
     let mut config = OcclusionConfig::default();
     let get = |name: &str| std::env::var(name).ok().map(|v| v.parse::<usize>().unwrap());
@@ -60,6 +60,15 @@ fn detector_config() -> OcclusionConfig {
         }
         if let Some(v) = get_f32("OCC_GROWTH_MARGIN") {
             growth.accumulation_margin = v;
+        }
+        if let Some(v) = get("OCC_GROWTH_RADIUS") {
+            growth.photometric_search_radius_px = v;
+        }
+        if let Some(v) = get("OCC_GROWTH_SEEDS") {
+            growth.persistent_seeds_only = v != 0;
+        }
+        if let Some(v) = get("OCC_GROWTH_INHERIT") {
+            growth.inherit_accumulation = v != 0;
         }
     }
     if get("OCC_GROWTH") == Some(0) {

@@ -8,14 +8,18 @@
 //! intensity inside its own depth footprint, while static surfaces, once warped with the camera
 //! motion, do not.
 //!
-//! After the detector's mask is final, each object is grown, breadth-first from its boundary,
-//! into 8-neighbours that
+//! After the detector's mask is final, each object is grown, breadth-first from its boundary
+//! pixels that were object pixels in the previous frame too (`persistent_seeds_only`: a
+//! one-frame false positive, such as a band along a depth edge after a poor motion, never
+//! grows), into 8-neighbours that
 //! (a) have a measured depth continuous with the pixel they grow from
 //!     (|Z(n) − Z(f)| ≤ `depth_tolerance` · Z(f)): growth stops at depth edges, so it does not
 //!     leak onto background at another depth;
 //! (b) changed appearance: |I_current(n) − I_previous(warp(n))| > `photometric_threshold`, with
 //!     warp(n) the static-world backward warp of n with its current depth and the frame's camera
-//!     motion, bilinear in the previous gray image;
+//!     motion, bilinear in the previous gray image, and also against every previous pixel within
+//!     `photometric_search_radius_px` of the warped position (a static surface whose gray is
+//!     misregistered by a pixel, as on real RGB-D data, finds its own texture there);
 //! (c) lie within `max_rings` pixels (chessboard distance) of the detected mask, so a static
 //!     surface touching an object at the same depth is never swallowed in one frame.
 //!
@@ -45,6 +49,19 @@ pub struct AppearanceGrowthConfig {
     /// A grown pixel's accumulation is at least τ_α · (1 + this margin) (unitless), so that it
     /// survives the next frame's truncation when its ΔZ is noise.
     pub accumulation_margin: f32,
+    /// The change must hold against every previous pixel within this many pixels (Chebyshev)
+    /// of the warped position, not just the interpolated one: a static surface misregistered by
+    /// up to this much (gray and depth not taken at the same instant, calibration) finds its
+    /// own texture there, a moving object's texture moved farther does not. 0 = the bilinear
+    /// sample only.
+    pub photometric_search_radius_px: usize,
+    /// A grown pixel inherits the accumulation of the pixel it grew from (moved to its depth,
+    /// §5.1's rule); false = it gets exactly τ_α · (1 + `accumulation_margin`).
+    pub inherit_accumulation: bool,
+    /// Only mask pixels that were object pixels in the previous frame too (at their
+    /// static-world warp position) seed the growth: an object is grown from its second frame
+    /// on, a one-frame false positive (a band along a depth edge after a poor motion) never.
+    pub persistent_seeds_only: bool,
 }
 
 impl Default for AppearanceGrowthConfig {
@@ -54,6 +71,9 @@ impl Default for AppearanceGrowthConfig {
             depth_tolerance: DEFAULT_DEPTH_TOLERANCE,
             max_rings: DEFAULT_MAX_RINGS,
             accumulation_margin: DEFAULT_ACCUMULATION_MARGIN,
+            photometric_search_radius_px: DEFAULT_SEARCH_RADIUS_PX,
+            inherit_accumulation: true,
+            persistent_seeds_only: true,
         }
     }
 }
@@ -66,6 +86,8 @@ const DEFAULT_DEPTH_TOLERANCE: f32 = 0.02;
 const DEFAULT_MAX_RINGS: usize = 32;
 /// Default `accumulation_margin`.
 const DEFAULT_ACCUMULATION_MARGIN: f32 = 0.5;
+/// Default `photometric_search_radius_px`.
+const DEFAULT_SEARCH_RADIUS_PX: usize = 1;
 
 impl AppearanceGrowthConfig {
     /// Checks every parameter.
@@ -112,6 +134,12 @@ pub(super) struct AppearanceGrowth {
     previous_gray: GrayF32,
     /// `previous_gray` belongs to the detector's previous frame.
     previous_valid: bool,
+    /// Final mask of the detector's previous frame (after growth).
+    previous_mask: Mask,
+    /// `previous_mask` belongs to the previous frame (false after a reset or without gray).
+    previous_mask_valid: bool,
+    /// `previous_mask` is all zero (it need not be cleared again).
+    previous_mask_empty: bool,
     /// `decided[u] == epoch` ⇔ u was grown or failed the photometric test this frame.
     decided: Vec<u32>,
     epoch: u32,
@@ -133,6 +161,9 @@ impl AppearanceGrowth {
             height: size.height,
             previous_gray: Image::filled(size, 0.0),
             previous_valid: false,
+            previous_mask: Image::filled(size, 0),
+            previous_mask_valid: false,
+            previous_mask_empty: true,
             decided: vec![0; size.area()],
             epoch: 0,
             frontier: Vec::with_capacity(size.area()),
@@ -143,16 +174,24 @@ impl AppearanceGrowth {
     /// Forgets the previous image (the next frame has nothing to compare with).
     pub(super) fn invalidate(&mut self) {
         self.previous_valid = false;
+        self.previous_mask_valid = false;
     }
 
-    /// Keeps `gray` as the previous image of the next frame (None: there is none).
-    pub(super) fn remember(&mut self, gray: Option<&GrayF32>) {
+    /// Keeps `gray` and the final `mask` (with `mask_pixels` set pixels) for the next frame
+    /// (gray None: there is nothing to compare with).
+    pub(super) fn remember(&mut self, gray: Option<&GrayF32>, mask: &Mask, mask_pixels: usize) {
         match gray {
             Some(g) if g.size() == self.previous_gray.size() => {
                 self.previous_gray.as_mut_slice().copy_from_slice(g.as_slice());
                 self.previous_valid = true;
+                // An empty mask is copied only once (static views cost nothing here).
+                if mask_pixels > 0 || !self.previous_mask_empty {
+                    self.previous_mask.as_mut_slice().copy_from_slice(mask.as_slice());
+                    self.previous_mask_empty = mask_pixels == 0;
+                }
+                self.previous_mask_valid = true;
             }
-            _ => self.previous_valid = false,
+            _ => self.invalidate(),
         }
     }
 
@@ -187,35 +226,6 @@ impl AppearanceGrowth {
         }
         self.epoch += 1;
         let epoch = self.epoch;
-        // Seeds: mask pixels with an unset 8-neighbour (interior pixels only; rows without
-        // mask pixels are skipped at memory speed).
-        self.frontier.clear();
-        {
-            let m = mask.as_slice();
-            for y in 1..height - 1 {
-                let row = &m[y * width..(y + 1) * width];
-                if !row.iter().any(|&v| v != 0) {
-                    continue;
-                }
-                for x in 1..width - 1 {
-                    let i = y * width + x;
-                    if m[i] == 0 {
-                        continue;
-                    }
-                    let boundary = m[i - 1] == 0
-                        || m[i + 1] == 0
-                        || m[i - width - 1] == 0
-                        || m[i - width] == 0
-                        || m[i - width + 1] == 0
-                        || m[i + width - 1] == 0
-                        || m[i + width] == 0
-                        || m[i + width + 1] == 0;
-                    if boundary {
-                        self.frontier.push(i as u32);
-                    }
-                }
-            }
-        }
         // The static-world backward warp in f32: previous = R · (Z · ray) + t.
         let rotation = previous_from_current.rotation.to_rotation_matrix();
         let r = rotation.matrix().map(|v| v as f32);
@@ -252,8 +262,78 @@ impl AppearanceGrowth {
             let top = previous[i] + a * (previous[i + 1] - previous[i]);
             let bottom = previous[i + width] + a * (previous[i + width + 1] - previous[i + width]);
             let sampled = top + b * (bottom - top);
-            (current[n] - sampled).abs() > growth.photometric_threshold
+            let threshold = growth.photometric_threshold;
+            let value = current[n];
+            if (value - sampled).abs() <= threshold {
+                return false;
+            }
+            // Every previous pixel within the radius of the nearest one must differ too.
+            let radius = growth.photometric_search_radius_px;
+            if radius == 0 {
+                return true;
+            }
+            let (un, vn) = ((u + 0.5) as usize, (v + 0.5) as usize);
+            let (x0, x1) = (un.saturating_sub(radius), (un + radius).min(width - 1));
+            let (y0, y1) = (vn.saturating_sub(radius), (vn + radius).min(height - 1));
+            (y0..=y1).all(|y| {
+                previous[y * width + x0..=y * width + x1]
+                    .iter()
+                    .all(|&p| (value - p).abs() > threshold)
+            })
         };
+        let previous_mask = self.previous_mask.as_slice();
+        let previous_mask_valid = self.previous_mask_valid;
+        let was_object = |n: usize| -> bool {
+            let zn = z[n];
+            if zn <= 0.0 || !previous_mask_valid {
+                return false;
+            }
+            let (x, y) = ((n % width) as f32, (n / width) as f32);
+            let p = [(x - cx) / fx * zn, (y - cy) / fy * zn, zn];
+            let q = [
+                r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0],
+                r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
+                r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2],
+            ];
+            if q[2] <= 0.0 {
+                return false;
+            }
+            let (u, v) = (fx * q[0] / q[2] + cx + 0.5, fy * q[1] / q[2] + cy + 0.5);
+            u >= 0.0
+                && v >= 0.0
+                && (u as usize) < width
+                && (v as usize) < height
+                && previous_mask[v as usize * width + u as usize] != 0
+        };
+        // Seeds: mask pixels with an unset 8-neighbour (interior pixels only; rows without
+        // mask pixels are skipped at memory speed), object pixels in the previous frame too.
+        self.frontier.clear();
+        {
+            let m = mask.as_slice();
+            for y in 1..height - 1 {
+                let row = &m[y * width..(y + 1) * width];
+                if !row.iter().any(|&v| v != 0) {
+                    continue;
+                }
+                for x in 1..width - 1 {
+                    let i = y * width + x;
+                    if m[i] == 0 {
+                        continue;
+                    }
+                    let boundary = m[i - 1] == 0
+                        || m[i + 1] == 0
+                        || m[i - width - 1] == 0
+                        || m[i - width] == 0
+                        || m[i - width + 1] == 0
+                        || m[i + width - 1] == 0
+                        || m[i + width] == 0
+                        || m[i + width + 1] == 0;
+                    if boundary && (!growth.persistent_seeds_only || was_object(i)) {
+                        self.frontier.push(i as u32);
+                    }
+                }
+            }
+        }
         let m = mask.as_mut_slice();
         let a = accumulation_m.as_mut_slice();
         for _ in 0..growth.max_rings {
@@ -286,7 +366,11 @@ impl AppearanceGrowth {
                     }
                     m[n] = MASK_SET;
                     let floor = config.threshold(config.alpha, zn) * (1.0 + growth.accumulation_margin);
-                    a[n] = (a[f] + zf - zn).max(floor);
+                    a[n] = if growth.inherit_accumulation {
+                        (a[f] + zf - zn).max(floor)
+                    } else {
+                        floor
+                    };
                     self.next.push(n as u32);
                 }
             }
@@ -328,21 +412,24 @@ mod tests {
         0.3 + 0.4 * (((x + phase_px) / 2) % 2) as f32
     }
 
-    /// The box's texture moved by `box_shift_px`, the wall's by `wall_shift_px` between frames.
-    fn gray_pair(box_shift_px: usize, wall_shift_px: usize) -> (GrayF32, GrayF32) {
-        let previous = Image::from_fn(SIZE, |x, y| {
-            if in_box(x, y) {
-                stripes(x, 0)
-            } else {
-                stripes(x, 1)
-            }
-        });
+    /// A static textured scene whose box texture is misregistered by 1 px between the frames.
+    fn misregistered_pair() -> (GrayF32, GrayF32) {
+        let previous = Image::from_fn(SIZE, |x, _| stripes(x, 0));
+        let current = Image::from_fn(SIZE, |x, y| stripes(x, usize::from(in_box(x, y))));
+        (previous, current)
+    }
+
+    /// Box and wall textured (2 px stripes); a moved texture puts the box's (or the wall's)
+    /// bright part where its dark part was: every pixel changes by at least 0.3, and no
+    /// previous pixel nearby matches it.
+    fn moved_pair(box_moved: bool, wall_moved: bool) -> (GrayF32, GrayF32) {
+        let texture = |x: usize, y: usize, moved: bool| {
+            let base = if in_box(x, y) { 0.1 } else { 0.3 };
+            base + 0.1 * ((x / 2) % 2) as f32 + if moved { 0.4 } else { 0.0 }
+        };
+        let previous = Image::from_fn(SIZE, |x, y| texture(x, y, false));
         let current = Image::from_fn(SIZE, |x, y| {
-            if in_box(x, y) {
-                stripes(x, box_shift_px)
-            } else {
-                stripes(x, 1 + wall_shift_px)
-            }
+            texture(x, y, if in_box(x, y) { box_moved } else { wall_moved })
         });
         (previous, current)
     }
@@ -360,7 +447,8 @@ mod tests {
         let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { 1.0 } else { 0.0 });
         let mask_pixels = SEED_X.len() * BOX_Y.len();
         let mut state = AppearanceGrowth::new(SIZE);
-        state.remember(Some(previous));
+        // The strip was already detected in the previous frame (the growth's seeds).
+        state.remember(Some(previous), &mask, mask_pixels);
         let counts = state.grow(
             &growth,
             &config,
@@ -387,7 +475,7 @@ mod tests {
     #[test]
     fn grows_over_a_moved_texture_and_stops_at_the_depth_edge() {
         // The wall's texture changes too (as if it were misregistered): only depth stops growth.
-        let (previous, current) = gray_pair(2, 2);
+        let (previous, current) = moved_pair(true, true);
         let (mask, accumulation, grown) = grow(&previous, &current, unbounded());
         assert_eq!(grown, BOX_X.len() * BOX_Y.len() - SEED_X.len() * BOX_Y.len());
         for y in 0..SIZE.height {
@@ -404,9 +492,57 @@ mod tests {
     }
 
     #[test]
+    fn a_static_texture_misregistered_by_a_pixel_is_not_grown_into() {
+        // The box's texture shifted by 1 px only (gray and depth not quite registered): with
+        // the default 1 px search every pixel finds its own value nearby; the bilinear sample
+        // alone sees half the pixels change.
+        let (previous, current) = misregistered_pair();
+        let (_, _, grown) = grow(&previous, &current, unbounded());
+        assert_eq!(grown, 0);
+        let point = AppearanceGrowthConfig {
+            photometric_search_radius_px: 0,
+            ..unbounded()
+        };
+        let (_, _, grown) = grow(&previous, &current, point);
+        assert!(grown > 0);
+    }
+
+    #[test]
+    fn a_component_new_in_this_frame_is_not_grown() {
+        let (previous, current) = moved_pair(true, false);
+        let seed = |x: usize, y: usize| SEED_X.contains(&x) && BOX_Y.contains(&y);
+        let run = |growth: AppearanceGrowthConfig| {
+            let mut mask = Image::from_fn(SIZE, |x, y| if seed(x, y) { MASK_SET } else { 0 });
+            let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { 1.0 } else { 0.0 });
+            let mut state = AppearanceGrowth::new(SIZE);
+            // Nothing was detected in the previous frame.
+            state.remember(Some(&previous), &Image::filled(SIZE, 0), 0);
+            state
+                .grow(
+                    &growth,
+                    &OcclusionConfig::default(),
+                    &intrinsics(),
+                    &Isometry3::identity(),
+                    &depth(),
+                    &current,
+                    &mut mask,
+                    &mut accumulation,
+                    SEED_X.len() * BOX_Y.len(),
+                )
+                .grown
+        };
+        assert_eq!(run(unbounded()), 0);
+        let any_seed = AppearanceGrowthConfig {
+            persistent_seeds_only: false,
+            ..unbounded()
+        };
+        assert_eq!(run(any_seed), (BOX_X.len() - SEED_X.len()) * BOX_Y.len());
+    }
+
+    #[test]
     fn does_not_grow_without_a_photometric_change() {
         // A static scene: nothing changed (same texture phase in both images).
-        let (previous, current) = gray_pair(0, 0);
+        let (previous, current) = moved_pair(false, false);
         let (_, _, grown) = grow(&previous, &current, unbounded());
         assert_eq!(grown, 0);
         // A change below the threshold: sensor noise, not motion.
@@ -419,7 +555,7 @@ mod tests {
 
     #[test]
     fn growth_per_frame_is_bounded_by_the_ring_count() {
-        let (previous, current) = gray_pair(2, 0);
+        let (previous, current) = moved_pair(true, false);
         let rings = 5;
         let bounded = AppearanceGrowthConfig {
             max_rings: rings,
@@ -450,13 +586,13 @@ mod tests {
                 3.0
             }
         });
-        let (previous, current) = gray_pair(2, 0);
+        let (previous, current) = moved_pair(true, false);
         for seed_a in [1.0f32, 0.31] {
             let seed = |x: usize, y: usize| SEED_X.contains(&x) && BOX_Y.contains(&y);
             let mut mask = Image::from_fn(SIZE, |x, y| if seed(x, y) { MASK_SET } else { 0 });
             let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { seed_a } else { 0.0 });
             let mut state = AppearanceGrowth::new(SIZE);
-            state.remember(Some(&previous));
+            state.remember(Some(&previous), &mask, SEED_X.len() * BOX_Y.len());
             let counts = state.grow(
                 &growth,
                 &config,
@@ -484,8 +620,45 @@ mod tests {
     }
 
     #[test]
+    fn bad_parameters_are_rejected_by_name() {
+        for (name, bad) in [
+            (
+                "appearance_growth.photometric_threshold",
+                AppearanceGrowthConfig {
+                    photometric_threshold: f32::NAN,
+                    ..AppearanceGrowthConfig::default()
+                },
+            ),
+            (
+                "appearance_growth.depth_tolerance",
+                AppearanceGrowthConfig {
+                    depth_tolerance: -0.1,
+                    ..AppearanceGrowthConfig::default()
+                },
+            ),
+            (
+                "appearance_growth.accumulation_margin",
+                AppearanceGrowthConfig {
+                    accumulation_margin: f32::INFINITY,
+                    ..AppearanceGrowthConfig::default()
+                },
+            ),
+        ] {
+            let config = OcclusionConfig {
+                appearance_growth: Some(bad),
+                ..OcclusionConfig::default()
+            };
+            match config.validate() {
+                Err(crate::error::Error::InvalidParameter { name: found, .. }) => assert_eq!(found, name),
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+        assert!(OcclusionConfig::default().validate().is_ok());
+    }
+
+    #[test]
     fn nothing_happens_without_a_previous_image_or_objects() {
-        let (_, current) = gray_pair(2, 0);
+        let (_, current) = moved_pair(true, false);
         let mut state = AppearanceGrowth::new(SIZE);
         let config = OcclusionConfig::default();
         let mut mask = Image::from_fn(SIZE, |x, y| if in_box(x, y) && x >= 94 { MASK_SET } else { 0 });
@@ -510,14 +683,15 @@ mod tests {
             0,
             "no previous image"
         );
-        state.remember(Some(&current));
+        let seeds = mask.clone();
+        state.remember(Some(&current), &seeds, 360);
         state.invalidate();
         assert_eq!(
             run(&mut state, &mut mask, &mut accumulation, 360),
             0,
             "after a reset"
         );
-        state.remember(Some(&current));
+        state.remember(Some(&current), &seeds, 360);
         let mut empty = Image::filled(SIZE, 0u8);
         assert_eq!(run(&mut state, &mut empty, &mut accumulation, 0), 0, "no objects");
     }

@@ -18,7 +18,11 @@
 //! 8. O = {A > τ_α}; predicted components of P = (P̂ ∨ Ñ) ∧ O that do not touch a non-predicted
 //!    object pixel (4-adjacency, §5.3 recommendation) are erased from A and O, except the
 //!    remainder of an object leaving the view (it holds pixels of P̂ and reaches the border);
-//! 9. the mask is O.
+//! 9. the mask is O;
+//! 10. appearance-gated object completion (not in the paper, [`AppearanceGrowthConfig`], on by
+//!     default, needs the gray image: [`OcclusionDetector::update_with_gray`]): objects grow into
+//!     neighbours with continuous depth whose intensity changed against the previous image
+//!     warped with the camera motion; grown pixels join O and A.
 //!
 //! Before step 1 a motion check (not in the paper, [`consistency`]) compares how well the given
 //! motion and no motion at all explain the new depth; a motion far worse than none (a glitch in
@@ -452,7 +456,7 @@ impl OcclusionDetector {
             self.delta_z_m.fill(0.0);
             self.newly_discovered.fill(0);
             self.frames = 1;
-            self.growth.remember(gray);
+            self.growth.remember(gray, &self.mask, 0);
             return Ok(&self.mask);
         }
         self.frames += 1;
@@ -605,7 +609,7 @@ impl OcclusionDetector {
             self.stats.mask_pixels += counts.grown;
             self.stats.growth_us = started.elapsed().as_micros() as u64;
         }
-        self.growth.remember(gray);
+        self.growth.remember(gray, &self.mask, self.stats.mask_pixels);
     }
 }
 
