@@ -125,7 +125,7 @@ fn entering_while_panning() {
     assert_f1(Scenario::EnteringWhilePanning, F1_TARGET);
 }
 
-/// Measured 0.919 (0.807 without appearance-gated object completion, which the paper's method
+/// Measured 0.873 (0.807 without appearance-gated object completion, which the paper's method
 /// cannot reach the target without): see `detector_synthetic.rs`.
 #[test]
 fn still_then_moving() {
