@@ -84,7 +84,7 @@ const MAX_GT_GAP_NS: u64 = 50_000_000;
 
 fn print_frame(i: usize, c: &FrameCounts, s: &OcclusionStats) {
     println!(
-        "{i:4} tp {:6} fp {:6} fn {:6}  P {:.3} R {:.3} F1 {:.3}  predicted {:5} pruned {:5} thin {:5} small {:3} grown {:5}{}",
+        "{i:4} tp {:6} fp {:6} fn {:6}  P {:.3} R {:.3} F1 {:.3}  predicted {:5} pruned {:5} thin {:5} small {:3} grown {:5} growth_us {:5} prune_us {:5}{}",
         c.true_positives,
         c.false_positives,
         c.false_negatives,
@@ -96,6 +96,8 @@ fn print_frame(i: usize, c: &FrameCounts, s: &OcclusionStats) {
         s.thin_pixels_erased,
         s.small_components_erased,
         s.grown_pixels,
+        s.growth_us,
+        s.prune_us,
         if s.motion_rejected { "  MOTION REJECTED" } else { "" }
     );
 }

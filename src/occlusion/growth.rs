@@ -145,6 +145,8 @@ pub(super) struct AppearanceGrowth {
     epoch: u32,
     frontier: Vec<u32>,
     next: Vec<u32>,
+    /// Boundary flags of one row (interior columns).
+    boundary_row: Vec<u8>,
 }
 
 /// What one growth pass did.
@@ -168,6 +170,7 @@ impl AppearanceGrowth {
             epoch: 0,
             frontier: Vec::with_capacity(size.area()),
             next: Vec::with_capacity(size.area()),
+            boundary_row: vec![0; size.width],
         }
     }
 
@@ -310,26 +313,39 @@ impl AppearanceGrowth {
         self.frontier.clear();
         {
             let m = mask.as_slice();
+            let boundary = &mut self.boundary_row[..width - 2];
             for y in 1..height - 1 {
                 let row = &m[y * width..(y + 1) * width];
                 if !row.iter().any(|&v| v != 0) {
                     continue;
                 }
-                for x in 1..width - 1 {
-                    let i = y * width + x;
-                    if m[i] == 0 {
+                // Mask values are 0 or 255: a pixel is on the boundary when it is set and the
+                // AND of its 8 neighbours is 0. Whole-row slices so the loop vectorises.
+                let (up, down) = (
+                    &m[(y - 1) * width..y * width],
+                    &m[(y + 1) * width..(y + 2) * width],
+                );
+                for (x, b) in boundary.iter_mut().enumerate() {
+                    let neighbours = up[x]
+                        & up[x + 1]
+                        & up[x + 2]
+                        & row[x]
+                        & row[x + 2]
+                        & down[x]
+                        & down[x + 1]
+                        & down[x + 2];
+                    *b = row[x + 1] & !neighbours;
+                }
+                // Skip runs without boundary pixels 8 at a time.
+                for (chunk_index, chunk) in boundary.chunks(8).enumerate() {
+                    if chunk.iter().all(|&b| b == 0) {
                         continue;
                     }
-                    let boundary = m[i - 1] == 0
-                        || m[i + 1] == 0
-                        || m[i - width - 1] == 0
-                        || m[i - width] == 0
-                        || m[i - width + 1] == 0
-                        || m[i + width - 1] == 0
-                        || m[i + width] == 0
-                        || m[i + width + 1] == 0;
-                    if boundary && (!growth.persistent_seeds_only || was_object(i)) {
-                        self.frontier.push(i as u32);
+                    for (k, &b) in chunk.iter().enumerate() {
+                        let i = y * width + 1 + chunk_index * 8 + k;
+                        if b != 0 && (!growth.persistent_seeds_only || was_object(i)) {
+                            self.frontier.push(i as u32);
+                        }
                     }
                 }
             }
