@@ -1,7 +1,10 @@
-//! Occlusion-accumulation detector alone (one `update` per frame, true camera motion) on the
-//! synthetic dominant-object sequence at 640×480 and 320×240; the transport kernel fused vs its
-//! scalar reference. Target (issue 4): ≤ 3 ms per 640×480 frame.
-//! Run: `cargo bench --bench occlusion` (add `-- --quick` for a short run).
+//! Occlusion-accumulation detector alone (one `update_with_gray` per frame, true camera motion)
+//! on the synthetic dominant-object sequence at 640×480 and 320×240, with the default config
+//! (appearance-gated object completion on). `occlusion_update_paper` runs the same frames at
+//! 640×480 with the completion off (the paper's detector): the difference is that stage's cost.
+//! `occlusion_update_starting_object` runs the still-then-moving frames where the completion
+//! grows the most (frames 31–46: a box starting to move). Target (issue 4): ≤ 3 ms per 640×480
+//! frame. Run: `cargo bench --bench occlusion` (add `-- --quick` for a short run).
 
 // A benchmark's setup failing is a bug in the benchmark: panicking is the right report.
 #![allow(clippy::unwrap_used)]
@@ -10,43 +13,109 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::Isometry3;
-use occmask::image_buf::{DepthMeters, ImageSize};
+use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
 use occmask::occlusion::{OcclusionConfig, OcclusionDetector};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
 /// Frames cycled through (a window where the object covers much of the view).
 const FRAMES: std::ops::Range<usize> = 40..70;
+/// Still-then-moving frames where the box starts to move (frame 30 is the last still one).
+const STARTING_FRAMES: std::ops::Range<usize> = 30..47;
+
+type Frame = (DepthMeters, GrayF32, Isometry3<f64>);
+
+fn frames(
+    scenario: Scenario,
+    size: ImageSize,
+    range: std::ops::Range<usize>,
+) -> (SequenceConfig, Vec<Frame>) {
+    let config = SequenceConfig {
+        size,
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(scenario, config);
+    let frames = range
+        .map(|i| {
+            let frame = sequence.frame(i);
+            (frame.depth_m, frame.gray, sequence.current_from_previous(i))
+        })
+        .collect();
+    (config, frames)
+}
+
+/// Benchmarks one `update_with_gray` per iteration, cycling through `frames` (reset at the
+/// first so the state is that of the sequence).
+fn bench(
+    c: &mut Criterion,
+    group: &str,
+    name: String,
+    config: &SequenceConfig,
+    frames: &[Frame],
+    detector_config: OcclusionConfig,
+) {
+    let size = config.size;
+    let mut group = c.benchmark_group(group);
+    let mut detector = OcclusionDetector::new(size, config.intrinsics(), detector_config).unwrap();
+    for (depth, gray, motion) in frames {
+        detector.update_with_gray(depth, Some(gray), motion).unwrap();
+    }
+    let mut k = 0;
+    group.throughput(Throughput::Elements(size.area() as u64));
+    group.bench_function(name, |b| {
+        b.iter(|| {
+            k = (k + 1) % frames.len();
+            if k == 0 {
+                detector.reset();
+            }
+            let (depth, gray, motion) = &frames[k];
+            black_box(
+                detector
+                    .update_with_gray(black_box(depth), Some(black_box(gray)), motion)
+                    .unwrap(),
+            );
+        })
+    });
+    group.finish();
+}
 
 fn detector(c: &mut Criterion) {
-    let mut group = c.benchmark_group("occlusion_update");
+    let paper = OcclusionConfig {
+        appearance_growth: None,
+        ..OcclusionConfig::default()
+    };
     for size in [ImageSize::new(640, 480), ImageSize::new(320, 240)] {
-        let config = SequenceConfig {
-            size,
-            ..SequenceConfig::default()
-        };
-        let sequence = SyntheticSequence::new(Scenario::DominantObject, config);
-        let frames: Vec<(DepthMeters, Isometry3<f64>)> = FRAMES
-            .map(|i| (sequence.frame(i).depth_m, sequence.current_from_previous(i)))
-            .collect();
-        let mut detector =
-            OcclusionDetector::new(size, config.intrinsics(), OcclusionConfig::default()).unwrap();
-        for (depth, motion) in &frames {
-            detector.update(depth, motion).unwrap();
+        let (config, frames) = frames(Scenario::DominantObject, size, FRAMES);
+        bench(
+            c,
+            "occlusion_update",
+            format!("{size}"),
+            &config,
+            &frames,
+            OcclusionConfig::default(),
+        );
+        if size.width == 640 {
+            bench(
+                c,
+                "occlusion_update_paper",
+                format!("{size}"),
+                &config,
+                &frames,
+                paper,
+            );
         }
-        let mut k = 0;
-        group.throughput(Throughput::Elements(size.area() as u64));
-        group.bench_function(format!("{size}"), |b| {
-            b.iter(|| {
-                k = (k + 1) % frames.len();
-                if k == 0 {
-                    detector.reset();
-                }
-                let (depth, motion) = &frames[k];
-                black_box(detector.update(black_box(depth), motion).unwrap());
-            })
-        });
     }
-    group.finish();
+    let size = ImageSize::new(640, 480);
+    let (config, frames) = frames(Scenario::StillThenMoving, size, STARTING_FRAMES);
+    for (name, detector_config) in [("growth", OcclusionConfig::default()), ("paper", paper)] {
+        bench(
+            c,
+            "occlusion_update_starting_object",
+            format!("{size} {name}"),
+            &config,
+            &frames,
+            detector_config,
+        );
+    }
 }
 
 criterion_group!(benches, detector);

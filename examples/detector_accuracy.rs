@@ -29,7 +29,9 @@ use occmask::time::parse_seconds_to_ns;
 use occmask::trajectory::{interpolate, parse_tum_line, StampedPose};
 
 /// The default config with overrides from the environment (for experiments):
-/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off).
+/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0
+/// (appearance growth off), OCC_GROWTH_PHOTO, OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS,
+/// OCC_GROWTH_MARGIN, OCC_GROWTH_RADIUS, OCC_GROWTH_INHERIT=0/1, OCC_GROWTH_SEEDS=0/1 (its parameters).
 fn detector_config() -> OcclusionConfig {
     let mut config = OcclusionConfig::default();
     let get = |name: &str| std::env::var(name).ok().map(|v| v.parse::<usize>().unwrap());
@@ -45,6 +47,33 @@ fn detector_config() -> OcclusionConfig {
     if let Some(v) = get("OCC_THIN_MARGIN") {
         config.thin_structure_border_margin_px = v;
     }
+    let get_f32 = |name: &str| std::env::var(name).ok().map(|v| v.parse::<f32>().unwrap());
+    if let Some(growth) = config.appearance_growth.as_mut() {
+        if let Some(v) = get_f32("OCC_GROWTH_PHOTO") {
+            growth.photometric_threshold = v;
+        }
+        if let Some(v) = get_f32("OCC_GROWTH_DEPTH") {
+            growth.depth_tolerance = v;
+        }
+        if let Some(v) = get("OCC_GROWTH_RINGS") {
+            growth.max_rings = v;
+        }
+        if let Some(v) = get_f32("OCC_GROWTH_MARGIN") {
+            growth.accumulation_margin = v;
+        }
+        if let Some(v) = get("OCC_GROWTH_RADIUS") {
+            growth.photometric_search_radius_px = v;
+        }
+        if let Some(v) = get("OCC_GROWTH_SEEDS") {
+            growth.persistent_seeds_only = v != 0;
+        }
+        if let Some(v) = get("OCC_GROWTH_INHERIT") {
+            growth.inherit_accumulation = v != 0;
+        }
+    }
+    if get("OCC_GROWTH") == Some(0) {
+        config.appearance_growth = None;
+    }
     config
 }
 
@@ -55,7 +84,7 @@ const MAX_GT_GAP_NS: u64 = 50_000_000;
 
 fn print_frame(i: usize, c: &FrameCounts, s: &OcclusionStats) {
     println!(
-        "{i:4} tp {:6} fp {:6} fn {:6}  P {:.3} R {:.3} F1 {:.3}  predicted {:5} pruned {:5} thin {:5} small {:3}{}",
+        "{i:4} tp {:6} fp {:6} fn {:6}  P {:.3} R {:.3} F1 {:.3}  predicted {:5} pruned {:5} thin {:5} small {:3} grown {:5} growth_us {:5} prune_us {:5}{}",
         c.true_positives,
         c.false_positives,
         c.false_negatives,
@@ -66,6 +95,9 @@ fn print_frame(i: usize, c: &FrameCounts, s: &OcclusionStats) {
         s.pruned_pixels,
         s.thin_pixels_erased,
         s.small_components_erased,
+        s.grown_pixels,
+        s.growth_us,
+        s.prune_us,
         if s.motion_rejected { "  MOTION REJECTED" } else { "" }
     );
 }
@@ -133,7 +165,11 @@ fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path
             (out.mask, out.stats.detector)
         } else {
             detector
-                .update(&frame.depth_m, &sequence.current_from_previous(i))
+                .update_with_gray(
+                    &frame.depth_m,
+                    Some(&frame.gray),
+                    &sequence.current_from_previous(i),
+                )
                 .unwrap();
             (detector.mask(), *detector.stats())
         };
@@ -243,10 +279,15 @@ fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Optio
     let mut min_consistency: f64 = 1.0;
     let mut fractions = Vec::new();
     let mut rejected = Vec::new();
+    let rgb_files = list(dir, "rgb.txt");
     for (t, path) in list(dir, "depth.txt") {
         let Some(world_from_camera) = interpolate(&truth, t, MAX_GT_GAP_NS) else {
             continue;
         };
+        // The nearest colour image (7-Scenes: not registered to the depth; a gate only).
+        let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
+        let rgb = image::open(rgb_path).unwrap().into_rgb8();
+        let gray = gray_from_rgb8(&Image::from_vec(SIZE, rgb.pixels().map(|p| p.0).collect()).unwrap());
         let image = image::open(&path).unwrap().into_luma16();
         depth_m_from_u16_into(image.as_raw(), 5000.0, &mut depth).unwrap();
         let motion = previous.map_or_else(Isometry3::identity, |p| world_from_camera.inverse() * p);
@@ -268,7 +309,7 @@ fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Optio
             min_consistency = min_consistency.min(consistency);
         }
         previous_depth.copy_from(&depth).unwrap();
-        let mask = detector.update(&depth, &motion).unwrap();
+        let mask = detector.update_with_gray(&depth, Some(&gray), &motion).unwrap();
         let set = mask.as_slice().iter().filter(|&&m| m != 0).count();
         let fraction = set as f64 / SIZE.area() as f64;
         let i = fractions.len();

@@ -790,7 +790,8 @@ impl Processor {
                 self.detector.reset();
                 stats.detector_reset = true;
             }
-            self.detector.update(frame.depth_m, &current_from_reference)?;
+            self.detector
+                .update_with_gray(frame.depth_m, Some(frame.gray), &current_from_reference)?;
             stats.detector = *self.detector.stats();
             // The detector's motion check restarted it (a motion far worse than none).
             stats.detector_reset |= stats.detector.motion_rejected;

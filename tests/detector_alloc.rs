@@ -46,27 +46,32 @@ fn detector_update_does_not_allocate_after_the_first_frame() {
     };
     let sequence = SyntheticSequence::new(Scenario::TwoObjectsCrossing, config);
     let frames: Vec<_> = (0..40)
-        .map(|i| (sequence.frame(i).depth_m, sequence.current_from_previous(i)))
+        .map(|i| {
+            let frame = sequence.frame(i);
+            (frame.depth_m, frame.gray, sequence.current_from_previous(i))
+        })
         .collect();
     let mut detector =
         OcclusionDetector::new(config.size, config.intrinsics(), OcclusionConfig::default()).unwrap();
     // Warm up the rayon pool and the first frames.
-    for (depth, motion) in &frames[..2] {
-        detector.update(depth, motion).unwrap();
+    for (depth, gray, motion) in &frames[..2] {
+        detector.update_with_gray(depth, Some(gray), motion).unwrap();
     }
     let before = ALLOCATIONS.load(Ordering::Relaxed);
-    let mut objects = 0;
-    for (depth, motion) in &frames[2..] {
+    let (mut objects, mut grown) = (0, 0);
+    for (depth, gray, motion) in &frames[2..] {
         objects += detector
-            .update(depth, motion)
+            .update_with_gray(depth, Some(gray), motion)
             .unwrap()
             .as_slice()
             .iter()
             .filter(|&&m| m != 0)
             .count();
+        grown += detector.stats().grown_pixels;
     }
     let after = ALLOCATIONS.load(Ordering::Relaxed);
     assert!(objects > 0, "the sequence must exercise labelling and prediction");
+    assert!(grown > 0, "the sequence must exercise appearance-gated growth");
     assert_eq!(after - before, 0, "allocations during 38 updates");
 }
 

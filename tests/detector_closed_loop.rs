@@ -3,9 +3,8 @@
 //! mean F1 ≥ 0.85 per scenario; static control ≤ 0.5 % false positives per frame after 5
 //! frames; on the dominant-object scenario the closed loop has ≥ 2× lower RPE than unmasked DVO).
 //!
-//! One scenario (still, then moving) misses the F1 target for the reason given in
-//! `detector_synthetic.rs` (it misses it with the true pose too); its test pins the measured
-//! level and says so.
+//! One scenario (still, then moving) needs appearance-gated object completion (on by default)
+//! for the target, for the reason given in `detector_synthetic.rs`.
 #![allow(clippy::unwrap_used)]
 
 use nalgebra::Isometry3;
@@ -126,10 +125,11 @@ fn entering_while_panning() {
     assert_f1(Scenario::EnteringWhilePanning, F1_TARGET);
 }
 
-/// TARGET MISSED (measured 0.808; 0.839 with the true pose): see `detector_synthetic.rs`.
+/// Measured 0.873 (0.807 without appearance-gated object completion, which the paper's method
+/// cannot reach the target without): see `detector_synthetic.rs`.
 #[test]
-fn still_then_moving_below_target() {
-    assert_f1(Scenario::StillThenMoving, 0.80);
+fn still_then_moving() {
+    assert_f1(Scenario::StillThenMoving, F1_TARGET);
 }
 
 #[test]

@@ -2,9 +2,8 @@
 //! motion (issue 4 "How good": mean F1 ≥ 0.90 per scenario; static control false-positive
 //! fraction ≤ 0.5 % per frame after the first 5 frames). Default `OcclusionConfig`.
 //!
-//! One scenario (still, then moving) misses the 0.90 target for reasons inherent to occlusion
-//! accumulation (see README "Moving-object detection"); its test pins the measured level
-//! instead so a regression still fails, and says so.
+//! One scenario (still, then moving) reaches the 0.90 target only with appearance-gated object
+//! completion, which the default config enables (see README "Moving-object detection").
 #![allow(clippy::unwrap_used)]
 
 use occmask::image_buf::ImageSize;
@@ -34,7 +33,11 @@ fn run(scenario: Scenario) -> (SegmentationSummary, Vec<FrameCounts>) {
     for i in 0..sequence.len() {
         sequence.render_into(i, &mut frame);
         let mask = detector
-            .update(&frame.depth_m, &sequence.current_from_previous(i))
+            .update_with_gray(
+                &frame.depth_m,
+                Some(&frame.gray),
+                &sequence.current_from_previous(i),
+            )
             .unwrap();
         counts.push(tally.add_masks(mask, &frame.gt_mask).unwrap());
     }
@@ -93,17 +96,22 @@ fn entering_while_panning() {
     assert_f1(Scenario::EnteringWhilePanning, F1_TARGET);
 }
 
-/// TARGET MISSED (measured 0.839; 0.795 before predicted remainders leaving through the border
-/// were kept). A box that stood still is background; when it starts moving only the parts leaving
-/// its old footprint occlude anything (frames 31–47: recall rises linearly 0.04 → 0.91, inherent
-/// to occlusion accumulation, README "Accuracy"). While it leaves the view at the right border
-/// (frames 85–87) its visible remainder lies entirely in once-predicted area: it must stay
-/// detected (`OcclusionConfig::prune_exit_margin_px`), until it is smaller than the object
-/// threshold (frame 88, 636 px).
+/// A box that stood still is background; when it starts moving only the parts leaving its old
+/// footprint occlude anything (the paper's method alone: frames 31–47 ramp recall 0.04 → 0.91,
+/// mean F1 0.839, README "Accuracy"). Appearance-gated object completion
+/// (`OcclusionConfig::appearance_growth`) grows the detected strip over the rest of the moving,
+/// textured box (measured 0.901). While it leaves the view at the right border (frames 85–87)
+/// its visible remainder lies entirely in once-predicted area: it must stay detected
+/// (`OcclusionConfig::prune_exit_margin_px`), until it is smaller than the object threshold
+/// (frame 88, 636 px).
 #[test]
-fn still_then_moving_below_target() {
+fn still_then_moving() {
     let (summary, counts) = run(Scenario::StillThenMoving);
-    assert!(summary.mean_f1 >= 0.83, "mean F1 {:.3}", summary.mean_f1);
+    assert!(summary.mean_f1 >= F1_TARGET, "mean F1 {:.3}", summary.mean_f1);
+    // The growth completes the box within a few frames of its start (from frame 32, the second
+    // frame the strip is detected; measured F1 0.948 at frame 39): the paper's method alone is
+    // at 0.620 there.
+    assert!(counts[39].f1() >= 0.9, "frame 39: F1 {:.3}", counts[39].f1());
     assert!(summary.mean_precision >= 0.95);
     for (i, c) in counts.iter().enumerate().take(88).skip(85) {
         assert!(

@@ -18,7 +18,11 @@
 //! 8. O = {A > τ_α}; predicted components of P = (P̂ ∨ Ñ) ∧ O that do not touch a non-predicted
 //!    object pixel (4-adjacency, §5.3 recommendation) are erased from A and O, except the
 //!    remainder of an object leaving the view (it holds pixels of P̂ and reaches the border);
-//! 9. the mask is O.
+//! 9. the mask is O;
+//! 10. appearance-gated object completion (not in the paper, [`AppearanceGrowthConfig`], on by
+//!     default, needs the gray image: [`OcclusionDetector::update_with_gray`]): objects grow into
+//!     neighbours with continuous depth whose intensity changed against the previous image
+//!     warped with the camera motion; grown pixels join O and A.
 //!
 //! Before step 1 a motion check (not in the paper, [`consistency`]) compares how well the given
 //! motion and no motion at all explain the new depth; a motion far worse than none (a glitch in
@@ -31,6 +35,7 @@
 
 mod components;
 pub mod consistency;
+mod growth;
 pub mod transport;
 
 use std::time::Instant;
@@ -39,11 +44,13 @@ use nalgebra::Isometry3;
 
 use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
-use crate::image_buf::{DepthMeters, Image, ImageSize, Mask, MASK_SET};
+use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, MASK_SET};
 
 use rayon::prelude::*;
 
 use components::Components;
+use growth::AppearanceGrowth;
+pub use growth::AppearanceGrowthConfig;
 use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch, UNLABELLED};
 
 /// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
@@ -121,6 +128,11 @@ pub struct OcclusionConfig {
     /// restarts from this frame instead of accumulating misregistered depth edges (which would
     /// stay in A as static false positives). `None` = trust every motion (the release).
     pub motion_check_margin: Option<f32>,
+    /// Appearance-gated object completion (not in the paper, see [`AppearanceGrowthConfig`]):
+    /// after the mask is final, objects grow into neighbouring pixels with continuous depth
+    /// whose intensity changed against the previous image warped with the camera motion. Needs
+    /// the gray image ([`OcclusionDetector::update_with_gray`]); `None` = off (the paper).
+    pub appearance_growth: Option<AppearanceGrowthConfig>,
 }
 
 impl Default for OcclusionConfig {
@@ -139,6 +151,7 @@ impl Default for OcclusionConfig {
             thin_structure_border_margin_px: 16,
             prune_exit_margin_px: EXIT_MARGIN_PX,
             motion_check_margin: Some(MOTION_CHECK_MARGIN),
+            appearance_growth: Some(AppearanceGrowthConfig::default()),
         }
     }
 }
@@ -190,6 +203,9 @@ impl OcclusionConfig {
         if let Some(margin) = self.motion_check_margin {
             positive("motion_check_margin", margin)?;
         }
+        if let Some(growth) = &self.appearance_growth {
+            growth.validate()?;
+        }
         Ok(())
     }
 
@@ -239,6 +255,10 @@ pub struct OcclusionStats {
     pub label_predict_us: u64,
     /// Time of the object mask and pruning, µs.
     pub prune_us: u64,
+    /// Pixels added by appearance-gated object completion.
+    pub grown_pixels: usize,
+    /// Time of appearance-gated object completion, µs.
+    pub growth_us: u64,
 }
 
 /// Per-sequence detector state (algorithm.md §1: Zc, A, P, B and scratch buffers).
@@ -268,6 +288,8 @@ pub struct OcclusionDetector {
     delta_z_m: DepthMeters,
     newly_discovered: Image<u8>,
     components: Components,
+    /// Appearance-gated object completion state (previous gray image, growth buffers).
+    growth: AppearanceGrowth,
     stats: OcclusionStats,
     /// Use the f64 scalar reference transport instead of the fast kernel (agreement tests).
     reference_transport: bool,
@@ -317,6 +339,7 @@ impl OcclusionDetector {
             delta_z_m: depth(),
             newly_discovered: Image::filled(size, 0),
             components: Components::new(size),
+            growth: AppearanceGrowth::new(size),
             stats: OcclusionStats::default(),
             reference_transport: false,
         })
@@ -344,6 +367,7 @@ impl OcclusionDetector {
         self.predicted.fill(0);
         self.mask.fill(0);
         self.compensated_m.fill(0.0);
+        self.growth.invalidate();
     }
 
     /// The accumulation map A (m): 0 or above τ_α after every update.
@@ -387,6 +411,32 @@ impl OcclusionDetector {
     /// # Errors
     /// [`Error::SizeMismatch`] when `depth_m` is not the detector's size.
     pub fn update(&mut self, depth_m: &DepthMeters, current_from_previous: &Isometry3<f64>) -> Result<&Mask> {
+        self.update_with_gray(depth_m, None, current_from_previous)
+    }
+
+    /// [`update`](Self::update) with the frame's gray image (0..1, registered to `depth_m`) for
+    /// appearance-gated object completion (`OcclusionConfig::appearance_growth`). Without a
+    /// gray image (or with the growth off) the detector is the paper's; the growth needs the
+    /// gray image of the previous frame too, so it starts on the second frame with one.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when `depth_m` or `gray` is not the detector's size.
+    pub fn update_with_gray(
+        &mut self,
+        depth_m: &DepthMeters,
+        gray: Option<&GrayF32>,
+        current_from_previous: &Isometry3<f64>,
+    ) -> Result<&Mask> {
+        if let Some(gray) = gray {
+            if gray.size() != self.size {
+                return Err(Error::SizeMismatch {
+                    what: "occlusion detector gray image".into(),
+                    expected: self.size,
+                    found: gray.size(),
+                });
+            }
+        }
+        let gray = gray.filter(|_| self.config.appearance_growth.is_some());
         if depth_m.size() != self.size {
             return Err(Error::SizeMismatch {
                 what: "occlusion detector depth".into(),
@@ -406,13 +456,14 @@ impl OcclusionDetector {
             self.delta_z_m.fill(0.0);
             self.newly_discovered.fill(0);
             self.frames = 1;
+            self.growth.remember(gray, &self.mask, 0);
             return Ok(&self.mask);
         }
         self.frames += 1;
         // One entry into the thread pool per frame: the parallel passes inside then start from
         // a worker thread instead of each queueing a job from outside the pool (the pool's
         // injector queue allocates a block every 63 outside jobs).
-        rayon::scope(|_| self.update_state(depth_m, current_from_previous));
+        rayon::scope(|_| self.update_state(depth_m, gray, current_from_previous));
         Ok(&self.mask)
     }
 
@@ -457,7 +508,12 @@ impl OcclusionDetector {
     }
 
     /// Steps 2–13 for every frame after the first.
-    fn update_state(&mut self, depth_m: &DepthMeters, current_from_previous: &Isometry3<f64>) {
+    fn update_state(
+        &mut self,
+        depth_m: &DepthMeters,
+        gray: Option<&GrayF32>,
+        current_from_previous: &Isometry3<f64>,
+    ) {
         let started = Instant::now();
         let previous_from_current = current_from_previous.inverse();
         let inputs = TransportInputs {
@@ -535,6 +591,25 @@ impl OcclusionDetector {
             self.mask.as_slice().iter().filter(|&&m| m != 0).count()
         );
         self.stats.prune_us = started.elapsed().as_micros() as u64;
+
+        if let (Some(growth), Some(gray)) = (&self.config.appearance_growth, gray) {
+            let started = Instant::now();
+            let counts = self.growth.grow(
+                growth,
+                &self.config,
+                &self.intrinsics,
+                &previous_from_current,
+                depth_m,
+                gray,
+                &mut self.mask,
+                &mut self.accumulation_m,
+                self.stats.mask_pixels,
+            );
+            self.stats.grown_pixels = counts.grown;
+            self.stats.mask_pixels += counts.grown;
+            self.stats.growth_us = started.elapsed().as_micros() as u64;
+        }
+        self.growth.remember(gray, &self.mask, self.stats.mask_pixels);
     }
 }
 

@@ -1,0 +1,714 @@
+//! Appearance-gated object completion (not in the paper; see the README's "Detector accuracy").
+//!
+//! Occlusion accumulation only sees the pixels where an object covers something farther away.
+//! An object that stood still and starts moving occludes nothing inside its old footprint: its
+//! interior sees object → object (ΔZ of a few centimetres, wiped by τ_α every frame), so only the
+//! strips it sweeps over background are detected, and the rest of it stays background until it
+//! has left its old footprint entirely. A moving *textured* object, though, changes the
+//! intensity inside its own depth footprint, while static surfaces, once warped with the camera
+//! motion, do not.
+//!
+//! After the detector's mask is final, each object is grown, breadth-first from its boundary
+//! pixels that were object pixels in the previous frame too (`persistent_seeds_only`: a
+//! one-frame false positive, such as a band along a depth edge after a poor motion, never
+//! grows), into 8-neighbours that
+//! (a) have a measured depth continuous with the pixel they grow from
+//!     (|Z(n) − Z(f)| ≤ `depth_tolerance` · Z(f)): growth stops at depth edges, so it does not
+//!     leak onto background at another depth;
+//! (b) changed appearance: |I_current(n) − I_previous(warp(n))| > `photometric_threshold`, with
+//!     warp(n) the static-world backward warp of n with its current depth and the frame's camera
+//!     motion, bilinear in the previous gray image, and also against every previous pixel within
+//!     `photometric_search_radius_px` of the warped position (a static surface whose gray is
+//!     misregistered by a pixel, as on real RGB-D data, finds its own texture there);
+//! (c) lie within `max_rings` pixels (chessboard distance) of the detected mask, so a static
+//!     surface touching an object at the same depth is never swallowed in one frame.
+//!
+//! A grown pixel enters the mask and gets the accumulation of the pixel it grew from, moved to
+//! its depth like §5.1's prediction (A(f) + Z(f) − Z(n), at least just above τ_α): the
+//! transport then carries it like any accumulated pixel, background reappearing behind it
+//! resets it (τ_β), and an object that stops keeps its mask as the paper's objects do. Without
+//! detected objects (a static view) the stage does nothing but keep the gray image.
+
+use nalgebra::Isometry3;
+
+use super::OcclusionConfig;
+use crate::geometry::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, MASK_SET};
+
+/// Parameters of appearance-gated object completion ([`OcclusionConfig::appearance_growth`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AppearanceGrowthConfig {
+    /// A pixel must change by more than this much gray (0..1 scale) against the previous image
+    /// warped with the camera motion to be grown into.
+    pub photometric_threshold: f32,
+    /// Depth continuity: a pixel is grown into from a neighbour only when their measured depths
+    /// differ by at most this fraction of the neighbour's depth (m/m).
+    pub depth_tolerance: f32,
+    /// Growth per frame stops this many pixels (8-connected rings) away from the detected mask.
+    pub max_rings: usize,
+    /// A grown pixel's accumulation is at least τ_α · (1 + this margin) (unitless), so that it
+    /// survives the next frame's truncation when its ΔZ is noise.
+    pub accumulation_margin: f32,
+    /// The change must hold against every previous pixel within this many pixels (Chebyshev)
+    /// of the warped position, not just the interpolated one: a static surface misregistered by
+    /// up to this much (gray and depth not taken at the same instant, calibration) finds its
+    /// own texture there, a moving object's texture moved farther does not. 0 = the bilinear
+    /// sample only.
+    pub photometric_search_radius_px: usize,
+    /// A grown pixel inherits the accumulation of the pixel it grew from (moved to its depth,
+    /// §5.1's rule); false = it gets exactly τ_α · (1 + `accumulation_margin`).
+    pub inherit_accumulation: bool,
+    /// Only mask pixels that were object pixels in the previous frame too (at their
+    /// static-world warp position) seed the growth: an object is grown from its second frame
+    /// on, a one-frame false positive (a band along a depth edge after a poor motion) never.
+    pub persistent_seeds_only: bool,
+}
+
+impl Default for AppearanceGrowthConfig {
+    fn default() -> Self {
+        Self {
+            photometric_threshold: DEFAULT_PHOTOMETRIC_THRESHOLD,
+            depth_tolerance: DEFAULT_DEPTH_TOLERANCE,
+            max_rings: DEFAULT_MAX_RINGS,
+            accumulation_margin: DEFAULT_ACCUMULATION_MARGIN,
+            photometric_search_radius_px: DEFAULT_SEARCH_RADIUS_PX,
+            inherit_accumulation: true,
+            persistent_seeds_only: true,
+        }
+    }
+}
+
+/// Default `photometric_threshold`: 0.04 gray ≈ 10 levels of 255.
+const DEFAULT_PHOTOMETRIC_THRESHOLD: f32 = 0.04;
+/// Default `depth_tolerance`: 2 % of Z.
+const DEFAULT_DEPTH_TOLERANCE: f32 = 0.02;
+/// Default `max_rings`.
+const DEFAULT_MAX_RINGS: usize = 32;
+/// Default `accumulation_margin`.
+const DEFAULT_ACCUMULATION_MARGIN: f32 = 0.5;
+/// Default `photometric_search_radius_px`.
+const DEFAULT_SEARCH_RADIUS_PX: usize = 1;
+
+impl AppearanceGrowthConfig {
+    /// Checks every parameter.
+    pub(super) fn validate(&self) -> crate::error::Result<()> {
+        let check = |name: &'static str, value: f32| {
+            if value.is_finite() && value >= 0.0 {
+                Ok(())
+            } else {
+                Err(crate::error::Error::InvalidParameter {
+                    name,
+                    value: value.to_string(),
+                    expected: "a finite number ≥ 0".into(),
+                })
+            }
+        };
+        check(
+            "appearance_growth.photometric_threshold",
+            self.photometric_threshold,
+        )?;
+        check("appearance_growth.depth_tolerance", self.depth_tolerance)?;
+        check("appearance_growth.accumulation_margin", self.accumulation_margin)?;
+        Ok(())
+    }
+}
+
+/// The 8 neighbours as (dx, dy).
+const NEIGHBOURS_8: [(isize, isize); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
+/// Preallocated state of the growth: the previous gray image and BFS buffers.
+#[derive(Debug, Clone)]
+pub(super) struct AppearanceGrowth {
+    width: usize,
+    height: usize,
+    /// Gray image of the detector's previous frame.
+    previous_gray: GrayF32,
+    /// `previous_gray` belongs to the detector's previous frame.
+    previous_valid: bool,
+    /// Final mask of the detector's previous frame (after growth).
+    previous_mask: Mask,
+    /// `previous_mask` belongs to the previous frame (false after a reset or without gray).
+    previous_mask_valid: bool,
+    /// `previous_mask` is all zero (it need not be cleared again).
+    previous_mask_empty: bool,
+    /// `decided[u] == epoch` ⇔ u was grown or failed the photometric test this frame.
+    decided: Vec<u32>,
+    epoch: u32,
+    frontier: Vec<u32>,
+    next: Vec<u32>,
+    /// Boundary flags of one row (interior columns).
+    boundary_row: Vec<u8>,
+}
+
+/// What one growth pass did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(super) struct GrowthCounts {
+    /// Pixels added to the mask.
+    pub grown: usize,
+}
+
+impl AppearanceGrowth {
+    pub(super) fn new(size: ImageSize) -> Self {
+        Self {
+            width: size.width,
+            height: size.height,
+            previous_gray: Image::filled(size, 0.0),
+            previous_valid: false,
+            previous_mask: Image::filled(size, 0),
+            previous_mask_valid: false,
+            previous_mask_empty: true,
+            decided: vec![0; size.area()],
+            epoch: 0,
+            frontier: Vec::with_capacity(size.area()),
+            next: Vec::with_capacity(size.area()),
+            boundary_row: vec![0; size.width],
+        }
+    }
+
+    /// Forgets the previous image (the next frame has nothing to compare with).
+    pub(super) fn invalidate(&mut self) {
+        self.previous_valid = false;
+        self.previous_mask_valid = false;
+    }
+
+    /// Keeps `gray` and the final `mask` (with `mask_pixels` set pixels) for the next frame
+    /// (gray None: there is nothing to compare with).
+    pub(super) fn remember(&mut self, gray: Option<&GrayF32>, mask: &Mask, mask_pixels: usize) {
+        match gray {
+            Some(g) if g.size() == self.previous_gray.size() => {
+                self.previous_gray.as_mut_slice().copy_from_slice(g.as_slice());
+                self.previous_valid = true;
+                // An empty mask is copied only once (static views cost nothing here).
+                if mask_pixels > 0 || !self.previous_mask_empty {
+                    self.previous_mask.as_mut_slice().copy_from_slice(mask.as_slice());
+                    self.previous_mask_empty = mask_pixels == 0;
+                }
+                self.previous_mask_valid = true;
+            }
+            _ => self.invalidate(),
+        }
+    }
+
+    /// Grows the objects of `mask` (final for this frame) into neighbours with continuous depth
+    /// and changed appearance, writing grown pixels into `mask` and `accumulation_m`.
+    /// `depth_m` is the current measured depth, `gray` the current image, `mask_pixels` the
+    /// number of set pixels of `mask` (nothing happens when 0). Does not remember `gray`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn grow(
+        &mut self,
+        growth: &AppearanceGrowthConfig,
+        config: &OcclusionConfig,
+        intrinsics: &PinholeIntrinsics,
+        previous_from_current: &Isometry3<f64>,
+        depth_m: &DepthMeters,
+        gray: &GrayF32,
+        mask: &mut Mask,
+        accumulation_m: &mut DepthMeters,
+        mask_pixels: usize,
+    ) -> GrowthCounts {
+        let mut counts = GrowthCounts::default();
+        if !self.previous_valid || mask_pixels == 0 || growth.max_rings == 0 {
+            return counts;
+        }
+        let (width, height) = (self.width, self.height);
+        if width < 3 || height < 3 {
+            return counts;
+        }
+        if self.epoch == u32::MAX {
+            self.decided.fill(0);
+            self.epoch = 0;
+        }
+        self.epoch += 1;
+        let epoch = self.epoch;
+        // The static-world backward warp in f32: previous = R · (Z · ray) + t.
+        let rotation = previous_from_current.rotation.to_rotation_matrix();
+        let r = rotation.matrix().map(|v| v as f32);
+        let t = previous_from_current.translation.vector.map(|v| v as f32);
+        let (fx, fy, cx, cy) = (
+            intrinsics.fx as f32,
+            intrinsics.fy as f32,
+            intrinsics.cx as f32,
+            intrinsics.cy as f32,
+        );
+        let previous = self.previous_gray.as_slice();
+        let current = gray.as_slice();
+        let z = depth_m.as_slice();
+        let changed = |n: usize| -> bool {
+            let (x, y) = ((n % width) as f32, (n / width) as f32);
+            let zn = z[n];
+            let p = [(x - cx) / fx * zn, (y - cy) / fy * zn, zn];
+            let q = [
+                r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0],
+                r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
+                r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2],
+            ];
+            if q[2] <= 0.0 {
+                return false;
+            }
+            let (u, v) = (fx * q[0] / q[2] + cx, fy * q[1] / q[2] + cy);
+            // Bilinear needs the 2×2 neighbourhood; a pixel warped outside has no evidence.
+            if !(u >= 0.0 && v >= 0.0 && u < (width - 1) as f32 && v < (height - 1) as f32) {
+                return false;
+            }
+            let (u0, v0) = (u as usize, v as usize);
+            let (a, b) = (u - u0 as f32, v - v0 as f32);
+            let i = v0 * width + u0;
+            let top = previous[i] + a * (previous[i + 1] - previous[i]);
+            let bottom = previous[i + width] + a * (previous[i + width + 1] - previous[i + width]);
+            let sampled = top + b * (bottom - top);
+            let threshold = growth.photometric_threshold;
+            let value = current[n];
+            if (value - sampled).abs() <= threshold {
+                return false;
+            }
+            // Every previous pixel within the radius of the nearest one must differ too.
+            let radius = growth.photometric_search_radius_px;
+            if radius == 0 {
+                return true;
+            }
+            let (un, vn) = ((u + 0.5) as usize, (v + 0.5) as usize);
+            let (x0, x1) = (un.saturating_sub(radius), (un + radius).min(width - 1));
+            let (y0, y1) = (vn.saturating_sub(radius), (vn + radius).min(height - 1));
+            (y0..=y1).all(|y| {
+                previous[y * width + x0..=y * width + x1]
+                    .iter()
+                    .all(|&p| (value - p).abs() > threshold)
+            })
+        };
+        let previous_mask = self.previous_mask.as_slice();
+        let previous_mask_valid = self.previous_mask_valid;
+        let was_object = |n: usize| -> bool {
+            let zn = z[n];
+            if zn <= 0.0 || !previous_mask_valid {
+                return false;
+            }
+            let (x, y) = ((n % width) as f32, (n / width) as f32);
+            let p = [(x - cx) / fx * zn, (y - cy) / fy * zn, zn];
+            let q = [
+                r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0],
+                r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
+                r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2],
+            ];
+            if q[2] <= 0.0 {
+                return false;
+            }
+            let (u, v) = (fx * q[0] / q[2] + cx + 0.5, fy * q[1] / q[2] + cy + 0.5);
+            u >= 0.0
+                && v >= 0.0
+                && (u as usize) < width
+                && (v as usize) < height
+                && previous_mask[v as usize * width + u as usize] != 0
+        };
+        // Seeds: mask pixels with an unset 8-neighbour (interior pixels only; rows without
+        // mask pixels are skipped at memory speed), object pixels in the previous frame too.
+        self.frontier.clear();
+        {
+            let m = mask.as_slice();
+            let boundary = &mut self.boundary_row[..width - 2];
+            for y in 1..height - 1 {
+                let row = &m[y * width..(y + 1) * width];
+                if !row.iter().any(|&v| v != 0) {
+                    continue;
+                }
+                // Mask values are 0 or 255: a pixel is on the boundary when it is set and the
+                // AND of its 8 neighbours is 0. Whole-row slices so the loop vectorises.
+                let (up, down) = (
+                    &m[(y - 1) * width..y * width],
+                    &m[(y + 1) * width..(y + 2) * width],
+                );
+                for (x, b) in boundary.iter_mut().enumerate() {
+                    let neighbours = up[x]
+                        & up[x + 1]
+                        & up[x + 2]
+                        & row[x]
+                        & row[x + 2]
+                        & down[x]
+                        & down[x + 1]
+                        & down[x + 2];
+                    *b = row[x + 1] & !neighbours;
+                }
+                // Skip runs without boundary pixels 8 at a time.
+                for (chunk_index, chunk) in boundary.chunks(8).enumerate() {
+                    if chunk.iter().all(|&b| b == 0) {
+                        continue;
+                    }
+                    for (k, &b) in chunk.iter().enumerate() {
+                        let i = y * width + 1 + chunk_index * 8 + k;
+                        if b != 0 && (!growth.persistent_seeds_only || was_object(i)) {
+                            self.frontier.push(i as u32);
+                        }
+                    }
+                }
+            }
+        }
+        let m = mask.as_mut_slice();
+        let a = accumulation_m.as_mut_slice();
+        for _ in 0..growth.max_rings {
+            self.next.clear();
+            for &f in &self.frontier {
+                let f = f as usize;
+                let (fx_i, fy_i) = (f % width, f / width);
+                let zf = z[f];
+                if zf <= 0.0 {
+                    continue;
+                }
+                let tolerance = growth.depth_tolerance * zf;
+                for &(dx, dy) in &NEIGHBOURS_8 {
+                    let (nx, ny) = (fx_i as isize + dx, fy_i as isize + dy);
+                    // Interior pixels only: the frontier's seeds are interior too.
+                    if nx < 1 || ny < 1 || nx >= width as isize - 1 || ny >= height as isize - 1 {
+                        continue;
+                    }
+                    let n = ny as usize * width + nx as usize;
+                    if m[n] != 0 || self.decided[n] == epoch {
+                        continue;
+                    }
+                    let zn = z[n];
+                    if zn <= 0.0 || (zn - zf).abs() > tolerance {
+                        continue;
+                    }
+                    self.decided[n] = epoch;
+                    if !changed(n) {
+                        continue;
+                    }
+                    m[n] = MASK_SET;
+                    let floor = config.threshold(config.alpha, zn) * (1.0 + growth.accumulation_margin);
+                    a[n] = if growth.inherit_accumulation {
+                        (a[f] + zf - zn).max(floor)
+                    } else {
+                        floor
+                    };
+                    self.next.push(n as u32);
+                }
+            }
+            counts.grown += self.next.len();
+            if self.next.is_empty() {
+                break;
+            }
+            std::mem::swap(&mut self.frontier, &mut self.next);
+        }
+        counts
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SIZE: ImageSize = ImageSize::new(160, 120);
+    /// The box: [40, 100) × [30, 90) at 2 m in front of a wall at 3 m.
+    const BOX_X: std::ops::Range<usize> = 40..100;
+    const BOX_Y: std::ops::Range<usize> = 30..90;
+    /// Object pixels already detected: the box's right 6 columns (a swept strip).
+    const SEED_X: std::ops::Range<usize> = 94..100;
+
+    fn intrinsics() -> PinholeIntrinsics {
+        PinholeIntrinsics::new(131.25, 131.25, 79.5, 59.5)
+    }
+
+    fn in_box(x: usize, y: usize) -> bool {
+        BOX_X.contains(&x) && BOX_Y.contains(&y)
+    }
+
+    fn depth() -> DepthMeters {
+        Image::from_fn(SIZE, |x, y| if in_box(x, y) { 2.0 } else { 3.0 })
+    }
+
+    /// Vertical stripes 2 px wide, shifted by `phase_px`: a 2 px shift inverts every pixel.
+    fn stripes(x: usize, phase_px: usize) -> f32 {
+        0.3 + 0.4 * (((x + phase_px) / 2) % 2) as f32
+    }
+
+    /// A static textured scene whose box texture is misregistered by 1 px between the frames.
+    fn misregistered_pair() -> (GrayF32, GrayF32) {
+        let previous = Image::from_fn(SIZE, |x, _| stripes(x, 0));
+        let current = Image::from_fn(SIZE, |x, y| stripes(x, usize::from(in_box(x, y))));
+        (previous, current)
+    }
+
+    /// Box and wall textured (2 px stripes); a moved texture puts the box's (or the wall's)
+    /// bright part where its dark part was: every pixel changes by at least 0.3, and no
+    /// previous pixel nearby matches it.
+    fn moved_pair(box_moved: bool, wall_moved: bool) -> (GrayF32, GrayF32) {
+        let texture = |x: usize, y: usize, moved: bool| {
+            let base = if in_box(x, y) { 0.1 } else { 0.3 };
+            base + 0.1 * ((x / 2) % 2) as f32 + if moved { 0.4 } else { 0.0 }
+        };
+        let previous = Image::from_fn(SIZE, |x, y| texture(x, y, false));
+        let current = Image::from_fn(SIZE, |x, y| {
+            texture(x, y, if in_box(x, y) { box_moved } else { wall_moved })
+        });
+        (previous, current)
+    }
+
+    /// Runs one growth step from the seed strip with A = 1 m on it; returns the mask, A and
+    /// the count.
+    fn grow(
+        previous: &GrayF32,
+        current: &GrayF32,
+        growth: AppearanceGrowthConfig,
+    ) -> (Mask, DepthMeters, usize) {
+        let config = OcclusionConfig::default();
+        let seed = |x: usize, y: usize| SEED_X.contains(&x) && BOX_Y.contains(&y);
+        let mut mask = Image::from_fn(SIZE, |x, y| if seed(x, y) { MASK_SET } else { 0 });
+        let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { 1.0 } else { 0.0 });
+        let mask_pixels = SEED_X.len() * BOX_Y.len();
+        let mut state = AppearanceGrowth::new(SIZE);
+        // The strip was already detected in the previous frame (the growth's seeds).
+        state.remember(Some(previous), &mask, mask_pixels);
+        let counts = state.grow(
+            &growth,
+            &config,
+            &intrinsics(),
+            &Isometry3::identity(),
+            &depth(),
+            current,
+            &mut mask,
+            &mut accumulation,
+            mask_pixels,
+        );
+        let set = mask.as_slice().iter().filter(|&&m| m != 0).count();
+        assert_eq!(set, mask_pixels + counts.grown);
+        (mask, accumulation, counts.grown)
+    }
+
+    fn unbounded() -> AppearanceGrowthConfig {
+        AppearanceGrowthConfig {
+            max_rings: 1000,
+            ..AppearanceGrowthConfig::default()
+        }
+    }
+
+    #[test]
+    fn grows_over_a_moved_texture_and_stops_at_the_depth_edge() {
+        // The wall's texture changes too (as if it were misregistered): only depth stops growth.
+        let (previous, current) = moved_pair(true, true);
+        let (mask, accumulation, grown) = grow(&previous, &current, unbounded());
+        assert_eq!(grown, BOX_X.len() * BOX_Y.len() - SEED_X.len() * BOX_Y.len());
+        for y in 0..SIZE.height {
+            for x in 0..SIZE.width {
+                assert_eq!(mask.get(x, y) != 0, in_box(x, y), "pixel ({x}, {y})");
+                if in_box(x, y) {
+                    // Same depth as the seed: its accumulation, carried over unchanged.
+                    assert_eq!(accumulation.get(x, y), 1.0, "pixel ({x}, {y})");
+                } else {
+                    assert_eq!(accumulation.get(x, y), 0.0);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_static_texture_misregistered_by_a_pixel_is_not_grown_into() {
+        // The box's texture shifted by 1 px only (gray and depth not quite registered): with
+        // the default 1 px search every pixel finds its own value nearby; the bilinear sample
+        // alone sees half the pixels change.
+        let (previous, current) = misregistered_pair();
+        let (_, _, grown) = grow(&previous, &current, unbounded());
+        assert_eq!(grown, 0);
+        let point = AppearanceGrowthConfig {
+            photometric_search_radius_px: 0,
+            ..unbounded()
+        };
+        let (_, _, grown) = grow(&previous, &current, point);
+        assert!(grown > 0);
+    }
+
+    #[test]
+    fn a_component_new_in_this_frame_is_not_grown() {
+        let (previous, current) = moved_pair(true, false);
+        let seed = |x: usize, y: usize| SEED_X.contains(&x) && BOX_Y.contains(&y);
+        let run = |growth: AppearanceGrowthConfig| {
+            let mut mask = Image::from_fn(SIZE, |x, y| if seed(x, y) { MASK_SET } else { 0 });
+            let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { 1.0 } else { 0.0 });
+            let mut state = AppearanceGrowth::new(SIZE);
+            // Nothing was detected in the previous frame.
+            state.remember(Some(&previous), &Image::filled(SIZE, 0), 0);
+            state
+                .grow(
+                    &growth,
+                    &OcclusionConfig::default(),
+                    &intrinsics(),
+                    &Isometry3::identity(),
+                    &depth(),
+                    &current,
+                    &mut mask,
+                    &mut accumulation,
+                    SEED_X.len() * BOX_Y.len(),
+                )
+                .grown
+        };
+        assert_eq!(run(unbounded()), 0);
+        let any_seed = AppearanceGrowthConfig {
+            persistent_seeds_only: false,
+            ..unbounded()
+        };
+        assert_eq!(run(any_seed), (BOX_X.len() - SEED_X.len()) * BOX_Y.len());
+    }
+
+    #[test]
+    fn does_not_grow_without_a_photometric_change() {
+        // A static scene: nothing changed (same texture phase in both images).
+        let (previous, current) = moved_pair(false, false);
+        let (_, _, grown) = grow(&previous, &current, unbounded());
+        assert_eq!(grown, 0);
+        // A change below the threshold: sensor noise, not motion.
+        let noisy = Image::from_fn(SIZE, |x, y| {
+            previous.get(x, y) + if (x + y) % 2 == 0 { 0.03 } else { -0.03 }
+        });
+        let (_, _, grown) = grow(&previous, &noisy, unbounded());
+        assert_eq!(grown, 0);
+    }
+
+    #[test]
+    fn growth_per_frame_is_bounded_by_the_ring_count() {
+        let (previous, current) = moved_pair(true, false);
+        let rings = 5;
+        let bounded = AppearanceGrowthConfig {
+            max_rings: rings,
+            ..AppearanceGrowthConfig::default()
+        };
+        let (mask, _, grown) = grow(&previous, &current, bounded);
+        // 5 columns left of the strip (the strip spans the box's full height).
+        assert_eq!(grown, rings * BOX_Y.len());
+        for y in 0..SIZE.height {
+            for x in 0..SIZE.width {
+                let expected = in_box(x, y) && x >= SEED_X.start - rings;
+                assert_eq!(mask.get(x, y) != 0, expected, "pixel ({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn grown_accumulation_follows_the_depth_and_stays_above_tau_alpha() {
+        // A slanted box face (depth rising 1 mm per column towards the left): the accumulation
+        // moves with the depth like §5.1's prediction; a seed with A barely above τ_α gives its
+        // neighbours at least τ_α · (1 + margin).
+        let config = OcclusionConfig::default();
+        let growth = unbounded();
+        let slanted = Image::from_fn(SIZE, |x, y| {
+            if in_box(x, y) {
+                2.0 + 0.001 * (BOX_X.end - x) as f32
+            } else {
+                3.0
+            }
+        });
+        let (previous, current) = moved_pair(true, false);
+        for seed_a in [1.0f32, 0.31] {
+            let seed = |x: usize, y: usize| SEED_X.contains(&x) && BOX_Y.contains(&y);
+            let mut mask = Image::from_fn(SIZE, |x, y| if seed(x, y) { MASK_SET } else { 0 });
+            let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { seed_a } else { 0.0 });
+            let mut state = AppearanceGrowth::new(SIZE);
+            state.remember(Some(&previous), &mask, SEED_X.len() * BOX_Y.len());
+            let counts = state.grow(
+                &growth,
+                &config,
+                &intrinsics(),
+                &Isometry3::identity(),
+                &slanted,
+                &current,
+                &mut mask,
+                &mut accumulation,
+                SEED_X.len() * BOX_Y.len(),
+            );
+            assert_eq!(counts.grown, (SEED_X.start - BOX_X.start) * BOX_Y.len());
+            for x in BOX_X.start..SEED_X.start {
+                let z = slanted.get(x, 60);
+                let floor = config.threshold(config.alpha, z) * (1.0 + growth.accumulation_margin);
+                let carried = seed_a + slanted.get(SEED_X.start, 60) - z;
+                let expected = carried.max(floor);
+                assert!(
+                    (accumulation.get(x, 60) - expected).abs() < 1e-4,
+                    "seed A {seed_a}, x {x}: {} vs {expected}",
+                    accumulation.get(x, 60)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bad_parameters_are_rejected_by_name() {
+        for (name, bad) in [
+            (
+                "appearance_growth.photometric_threshold",
+                AppearanceGrowthConfig {
+                    photometric_threshold: f32::NAN,
+                    ..AppearanceGrowthConfig::default()
+                },
+            ),
+            (
+                "appearance_growth.depth_tolerance",
+                AppearanceGrowthConfig {
+                    depth_tolerance: -0.1,
+                    ..AppearanceGrowthConfig::default()
+                },
+            ),
+            (
+                "appearance_growth.accumulation_margin",
+                AppearanceGrowthConfig {
+                    accumulation_margin: f32::INFINITY,
+                    ..AppearanceGrowthConfig::default()
+                },
+            ),
+        ] {
+            let config = OcclusionConfig {
+                appearance_growth: Some(bad),
+                ..OcclusionConfig::default()
+            };
+            match config.validate() {
+                Err(crate::error::Error::InvalidParameter { name: found, .. }) => assert_eq!(found, name),
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+        assert!(OcclusionConfig::default().validate().is_ok());
+    }
+
+    #[test]
+    fn nothing_happens_without_a_previous_image_or_objects() {
+        let (_, current) = moved_pair(true, false);
+        let mut state = AppearanceGrowth::new(SIZE);
+        let config = OcclusionConfig::default();
+        let mut mask = Image::from_fn(SIZE, |x, y| if in_box(x, y) && x >= 94 { MASK_SET } else { 0 });
+        let mut accumulation = Image::filled(SIZE, 0.0f32);
+        let run = |state: &mut AppearanceGrowth, mask: &mut Mask, accumulation: &mut DepthMeters, pixels| {
+            state
+                .grow(
+                    &unbounded(),
+                    &config,
+                    &intrinsics(),
+                    &Isometry3::identity(),
+                    &depth(),
+                    &current,
+                    mask,
+                    accumulation,
+                    pixels,
+                )
+                .grown
+        };
+        assert_eq!(
+            run(&mut state, &mut mask, &mut accumulation, 360),
+            0,
+            "no previous image"
+        );
+        let seeds = mask.clone();
+        state.remember(Some(&current), &seeds, 360);
+        state.invalidate();
+        assert_eq!(
+            run(&mut state, &mut mask, &mut accumulation, 360),
+            0,
+            "after a reset"
+        );
+        state.remember(Some(&current), &seeds, 360);
+        let mut empty = Image::filled(SIZE, 0u8);
+        assert_eq!(run(&mut state, &mut empty, &mut accumulation, 0), 0, "no objects");
+    }
+}
