@@ -77,6 +77,7 @@ fn load_gray(path: &Path) -> GrayF32 {
 /// the frames whose motion the detector rejected.
 fn false_positive_fractions(dir: &Path, intrinsics: PinholeIntrinsics) -> (Vec<f64>, Vec<usize>) {
     let depth_files = list(dir, "depth.txt");
+    let rgb_files = list(dir, "rgb.txt");
     let truth = ground_truth(dir);
     let size = ImageSize::new(640, 480);
     let mut detector = OcclusionDetector::new(size, intrinsics, OcclusionConfig::default()).unwrap();
@@ -91,7 +92,11 @@ fn false_positive_fractions(dir: &Path, intrinsics: PinholeIntrinsics) -> (Vec<f
         load_depth(&path, &mut depth);
         let motion = previous.map_or_else(Isometry3::identity, |p| world_from_camera.inverse() * p);
         previous = Some(world_from_camera);
-        let mask = detector.update(&depth, &motion).unwrap();
+        // The nearest colour image, for the default appearance growth (7-Scenes: colour is not
+        // registered to depth, which the growth's gates must tolerate).
+        let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
+        let gray = load_gray(rgb_path);
+        let mask = detector.update_with_gray(&depth, Some(&gray), &motion).unwrap();
         let set = mask.as_slice().iter().filter(|&&m| m != 0).count();
         if detector.stats().motion_rejected {
             rejected.push(fractions.len());
