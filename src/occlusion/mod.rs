@@ -269,6 +269,8 @@ pub struct OcclusionDetector {
     newly_discovered: Image<u8>,
     components: Components,
     stats: OcclusionStats,
+    /// Ray-factor tables of the motion check (per sampled column, per sampled row).
+    motion_check_rays: (Vec<f64>, Vec<f64>),
     /// Use the f64 scalar reference transport instead of the fast kernel (agreement tests).
     reference_transport: bool,
 }
@@ -318,6 +320,10 @@ impl OcclusionDetector {
             newly_discovered: Image::filled(size, 0),
             components: Components::new(size),
             stats: OcclusionStats::default(),
+            motion_check_rays: (
+                Vec::with_capacity(size.width.div_ceil(MOTION_CHECK_STRIDE)),
+                Vec::with_capacity(size.height.div_ceil(MOTION_CHECK_STRIDE)),
+            ),
             reference_transport: false,
         })
     }
@@ -423,20 +429,17 @@ impl OcclusionDetector {
         let Some(margin) = self.config.motion_check_margin else {
             return false;
         };
-        let consistency = |motion: &Isometry3<f64>| {
-            consistency::depth_consistency(
-                &self.intrinsics,
-                &self.compensated_m,
-                Some(&self.mask),
-                depth_m,
-                motion,
-                MOTION_CHECK_STRIDE,
-            )
-        };
-        let (Some(moved), Some(still)) = (
-            consistency(current_from_previous),
-            consistency(&Isometry3::identity()),
-        ) else {
+        let (moved, still) = consistency::depth_consistency_with_identity(
+            &self.intrinsics,
+            &self.compensated_m,
+            Some(&self.mask),
+            depth_m,
+            current_from_previous,
+            MOTION_CHECK_STRIDE,
+            &mut self.motion_check_rays.0,
+            &mut self.motion_check_rays.1,
+        );
+        let (Some(moved), Some(still)) = (moved, still) else {
             return false;
         };
         let (moved, still, compared, sampled) = (

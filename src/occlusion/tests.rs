@@ -520,3 +520,62 @@ fn the_motion_check_does_not_judge_when_a_moving_object_fills_the_view() {
     detector.update(&depth, &glitch).unwrap();
     assert!(detector.stats().motion_rejected, "{:?}", detector.stats());
 }
+
+#[test]
+fn the_one_pass_motion_check_matches_two_reference_checks() {
+    // Real synthetic frames (Kinect noise, invalid edges) with the object's mask, the true
+    // motion, a perturbed one, no motion and a 3° glitch, at several strides: the fused pass
+    // gives the reference's counts exactly, for the motion and for the identity.
+    let sequence_config = SequenceConfig {
+        size: SIZE,
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(Scenario::SmallObjectCrossing, sequence_config);
+    let k = sequence_config.intrinsics();
+    let (previous, current) = (sequence.frame(20), sequence.frame(21));
+    let mask = Image::from_fn(SIZE, |x, y| {
+        if previous.gt_mask.get(x, y) != 0 || (x + y) % 17 == 0 {
+            MASK_SET
+        } else {
+            0
+        }
+    });
+    let true_motion = sequence.current_from_previous(21);
+    let motions = [
+        true_motion,
+        true_motion * Isometry3::new(Vector3::new(0.02, -0.01, 0.03), Vector3::new(0.01, -0.02, 0.0)),
+        Isometry3::identity(),
+        Isometry3::new(Vector3::zeros(), Vector3::new(0.0, 3f64.to_radians(), 0.0)),
+    ];
+    let (mut columns, mut rows) = (Vec::new(), Vec::new());
+    let mut judged = 0;
+    for motion in &motions {
+        for stride in [1, 3, 8] {
+            for mask in [None, Some(&mask)] {
+                let reference = |m: &Isometry3<f64>| {
+                    consistency::depth_consistency(&k, &previous.depth_m, mask, &current.depth_m, m, stride)
+                };
+                let fused = consistency::depth_consistency_with_identity(
+                    &k,
+                    &previous.depth_m,
+                    mask,
+                    &current.depth_m,
+                    motion,
+                    stride,
+                    &mut columns,
+                    &mut rows,
+                );
+                assert_eq!(
+                    fused,
+                    (reference(motion), reference(&Isometry3::identity())),
+                    "stride {stride}"
+                );
+                judged += usize::from(fused.0.is_some_and(|c| c.agreeing_fraction < 1.0));
+            }
+        }
+    }
+    assert!(
+        judged > 12,
+        "the motions must be judged, with disagreeing samples: {judged}"
+    );
+}

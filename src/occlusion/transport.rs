@@ -693,7 +693,9 @@ fn flags_block_generic(
     for i in 0..len {
         let newly = (zc_row[i] > 0.0) & (sampled[i] == 0.0);
         newly_row[i] = u8::from(newly);
-        p_row[i] = if sources[i] != NO_SOURCE { carried_p[i] } else { 0 };
+        // An unconditional load masked by a select (a conditional load keeps the loop scalar).
+        let keep = if sources[i] != NO_SOURCE { u8::MAX } else { 0 };
+        p_row[i] = carried_p[i] & keep;
         newly_count += u32::from(newly);
     }
     newly_count
