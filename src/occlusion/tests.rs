@@ -2,8 +2,10 @@ use nalgebra::{Isometry3, Vector3};
 
 use super::transport::{
     transport, transport_scalar, transport_with, Simd, TransportInputs, TransportOutputs, TransportScratch,
+    UNLABELLED,
 };
 use super::*;
+use crate::image_buf::MASK_SET;
 use crate::synthetic::{DepthSensorModel, Scenario, SequenceConfig, SyntheticSequence};
 
 const SIZE: ImageSize = ImageSize::new(160, 120);
@@ -578,4 +580,86 @@ fn the_one_pass_motion_check_matches_two_reference_checks() {
         judged > 12,
         "the motions must be judged, with disagreeing samples: {judged}"
     );
+}
+
+#[test]
+fn object_mask_builds_match_the_definition() {
+    // Random A around the threshold, depths with holes, P̂ and Ñ flags: the baseline and AVX2
+    // builds give exactly O = {A > τ_α}, P = (P̂ ∨ Ñ) ∧ O and the labels of P.
+    let len = 1000;
+    let mut state = 77u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 33) % 1000) as f32 / 1000.0
+    };
+    let z: Vec<f32> = (0..len)
+        .map(|_| if next() < 0.1 { 0.0 } else { 0.5 + 4.0 * next() })
+        .collect();
+    let a: Vec<f32> = z
+        .iter()
+        .map(|&z| if next() < 0.3 { 0.0 } else { 0.3 * z * next() * z })
+        .collect();
+    let carried: Vec<u8> = (0..len).map(|_| u8::from(next() < 0.2)).collect();
+    let newly: Vec<u8> = (0..len).map(|_| u8::from(next() < 0.2)).collect();
+    for (threshold_form, predicting) in [
+        (ThresholdForm::Linear, true),
+        (ThresholdForm::Quadratic, true),
+        (ThresholdForm::Linear, false),
+    ] {
+        let config = OcclusionConfig {
+            threshold_form,
+            predict_newly_discovered: predicting,
+            ..OcclusionConfig::default()
+        };
+        let parameters = transport::ObjectMaskParameters {
+            quadratic: threshold_form == ThresholdForm::Quadratic,
+            alpha: config.alpha,
+            predicting,
+        };
+        let run = |simd: Simd| {
+            let (mut mask, mut predicted, mut labels) = (vec![9u8; len], vec![9u8; len], vec![9u32; len]);
+            let counts = transport::object_mask_block_with(
+                simd,
+                &parameters,
+                &a,
+                &z,
+                &carried,
+                &newly,
+                &mut mask,
+                &mut predicted,
+                &mut labels,
+            );
+            (counts, mask, predicted, labels)
+        };
+        let object: Vec<bool> = (0..len)
+            .map(|i| a[i] > config.threshold(config.alpha, z[i]))
+            .collect();
+        let is_predicted: Vec<bool> = (0..len)
+            .map(|i| predicting && object[i] && (carried[i] != 0 || newly[i] != 0))
+            .collect();
+        let expected = (
+            (
+                object.iter().filter(|&&o| o).count() as u32,
+                is_predicted.iter().filter(|&&p| p).count() as u32,
+            ),
+            object
+                .iter()
+                .map(|&o| if o { MASK_SET } else { 0 })
+                .collect::<Vec<u8>>(),
+            is_predicted.iter().map(|&p| u8::from(p)).collect::<Vec<u8>>(),
+            is_predicted
+                .iter()
+                .map(|&p| if p { UNLABELLED } else { 0 })
+                .collect::<Vec<u32>>(),
+        );
+        assert!(
+            expected.0 .0 > 100 && (expected.0 .1 > 20 || !predicting),
+            "{:?}",
+            expected.0
+        );
+        assert_eq!(run(Simd::Baseline), expected, "{threshold_form:?} {predicting}");
+        assert_eq!(run(Simd::Avx2), expected, "{threshold_form:?} {predicting}");
+    }
 }
