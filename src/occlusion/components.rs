@@ -53,6 +53,40 @@ pub(super) struct Components {
     morph_b: Vec<u8>,
 }
 
+/// Elements per step of [`position_chunked`]: one or two AVX2 registers of u32 / u8.
+const SCAN_CHUNK: usize = 32;
+
+/// `values.iter().position(hit)`, but skips whole chunks of [`SCAN_CHUNK`] elements with a
+/// branch-free test the compiler vectorises (the scans for seeds, run ends and the newly
+/// discovered pixels mostly cross long stretches without a hit). Reference: `Iterator::position`
+/// (agreement test below).
+#[inline]
+fn position_chunked<T: Copy>(values: &[T], hit: impl Fn(T) -> bool) -> Option<usize> {
+    let (chunks, remainder) = values.as_chunks::<SCAN_CHUNK>();
+    for (k, chunk) in chunks.iter().enumerate() {
+        if chunk.iter().fold(false, |any, &v| any | hit(v)) {
+            return chunk.iter().position(|&v| hit(v)).map(|i| k * SCAN_CHUNK + i);
+        }
+    }
+    let base = chunks.len() * SCAN_CHUNK;
+    remainder.iter().position(|&v| hit(v)).map(|i| base + i)
+}
+
+/// `values.iter().position(|&v| v != 0)`, skipping 32 zero bytes at a time as four u64 words
+/// (Ñ is sparse: most of its rows hold no pixel).
+#[inline]
+fn position_nonzero_u8(values: &[u8]) -> Option<usize> {
+    let (chunks, remainder) = values.as_chunks::<32>();
+    for (k, chunk) in chunks.iter().enumerate() {
+        let (words, _) = chunk.as_chunks::<8>();
+        if words.iter().fold(0, |any, w| any | u64::from_ne_bytes(*w)) != 0 {
+            return chunk.iter().position(|&v| v != 0).map(|i| k * 32 + i);
+        }
+    }
+    let base = chunks.len() * 32;
+    remainder.iter().position(|&v| v != 0).map(|i| base + i)
+}
+
 /// Neighbour (x + dx, y + dy) if inside the image.
 #[inline]
 fn neighbour(x: usize, y: usize, dx: isize, dy: isize, width: usize, height: usize) -> Option<usize> {
@@ -117,10 +151,9 @@ impl Components {
             while left > row_start && labels[left - 1] == UNLABELLED {
                 left -= 1;
             }
-            let mut right = p;
-            while right + 1 < row_start + width && labels[right + 1] == UNLABELLED {
-                right += 1;
-            }
+            let row_end = row_start + width;
+            let right =
+                p + position_chunked(&labels[p + 1..row_end], |l| l != UNLABELLED).unwrap_or(row_end - 1 - p);
             labels[left..=right].fill(id);
             self.component.extend(left as u32..=right as u32);
             // 8-adjacency: the neighbour rows are scanned one column beyond the run on each side.
@@ -170,6 +203,25 @@ impl Components {
         }
     }
 
+    /// The next [`UNLABELLED`] pixel in row-major order inside `bounds`, from `cursor` (row,
+    /// column) on; the cursor moves past it. Reference: the row-major loop over the box with a
+    /// label test per pixel.
+    fn next_unlabelled(&self, cursor: &mut (usize, usize), bounds: PixelBounds) -> Option<usize> {
+        let width = self.width;
+        while cursor.0 <= bounds.y1 {
+            let (y, x) = *cursor;
+            let row = &self.labels[y * width..y * width + bounds.x1 + 1];
+            if x < row.len() {
+                if let Some(offset) = position_chunked(&row[x..], |l| l == UNLABELLED) {
+                    *cursor = (y, x + offset + 1);
+                    return Some(y * width + x + offset);
+                }
+            }
+            *cursor = (y + 1, bounds.x0);
+        }
+        None
+    }
+
     /// The label buffer: the transport writes the object set O₀ into it ([`UNLABELLED`] on set
     /// pixels, 0 elsewhere) before [`Components::suppress_and_predict`].
     pub(super) fn labels_mut(&mut self) -> &mut [u32] {
@@ -189,7 +241,6 @@ impl Components {
         accumulation_m: &mut DepthMeters,
     ) -> LabelStats {
         let mut stats = LabelStats::default();
-        let width = self.width;
         let Some(bounds) = bounds else {
             return stats;
         };
@@ -212,21 +263,20 @@ impl Components {
                 0..0
             };
             for y in interior_rows {
-                let interior = &self.target[y * width + 1..(y + 1) * width - 1];
-                for (x, &t) in (1..).zip(interior) {
-                    if t != 0 {
-                        self.target_pixels.push((y * width + x) as u32);
-                    }
+                let first = y * width + 1;
+                let interior = &self.target[first..(y + 1) * width - 1];
+                let mut x = 0;
+                while let Some(offset) = position_nonzero_u8(&interior[x..]) {
+                    self.target_pixels.push((first + x + offset) as u32);
+                    x += offset + 1;
                 }
             }
         }
         let mut next_id = 0u32;
-        // Seeds in row-major order; the set (and so every seed) lies in the bounding box.
-        let seeds = (bounds.y0..=bounds.y1).flat_map(|y| y * width + bounds.x0..=y * width + bounds.x1);
-        for seed in seeds {
-            if self.labels[seed] != UNLABELLED {
-                continue;
-            }
+        // Seeds in row-major order; the set (and so every seed) lies in the bounding box. A
+        // flood only relabels pixels, so the scan goes on after the seed.
+        let mut cursor = (bounds.y0, bounds.x0);
+        while let Some(seed) = self.next_unlabelled(&mut cursor, bounds) {
             next_id += 1;
             self.flood(seed, next_id);
             stats.components += 1;
@@ -282,23 +332,29 @@ impl Components {
         }
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
+        // Interior columns of the box (pixels nearer the border than the margin are kept).
+        let x_first = bounds.x0.max(border_margin_px);
+        let x_end = (bounds.x1 + 1).min(width.saturating_sub(border_margin_px));
+        if x_first >= x_end {
+            return 0;
+        }
         for (box_y, opened_row) in self.morph_a[..box_area].chunks_exact(box_width).enumerate() {
             let y = bounds.y0 + box_y;
-            for (box_x, &opened) in opened_row.iter().enumerate() {
-                let x = bounds.x0 + box_x;
-                let i = y * width + x;
-                if self.labels[i] != 0 && opened == 0 {
-                    let interior = x >= border_margin_px
-                        && y >= border_margin_px
-                        && x + border_margin_px < width
-                        && y + border_margin_px < height;
-                    if interior {
-                        self.labels[i] = 0;
-                        a[i] = 0.0;
-                        erased += 1;
-                    }
-                }
+            if y < border_margin_px || y + border_margin_px >= height {
+                continue;
             }
+            // Branch-free over the row's interior columns, so the loop vectorises.
+            let row = y * width + x_first..y * width + x_end;
+            let opened_row = &opened_row[x_first - bounds.x0..x_end - bounds.x0];
+            let (labels, a_row) = (&mut self.labels[row.clone()], &mut a[row]);
+            let mut row_erased = 0u32;
+            for ((label, a), &opened) in labels.iter_mut().zip(a_row.iter_mut()).zip(opened_row) {
+                let erase = (*label != 0) & (opened == 0);
+                *label = if erase { 0 } else { *label };
+                *a = if erase { 0.0 } else { *a };
+                row_erased += u32::from(erase);
+            }
+            erased += row_erased as usize;
         }
         erased
     }
@@ -432,10 +488,8 @@ impl Components {
         };
         let mut pruned = 0;
         let mut next_id = 0u32;
-        for seed in bounds.y0 * width..(bounds.y1 + 1) * width {
-            if self.labels[seed] != UNLABELLED {
-                continue;
-            }
+        let mut cursor = (bounds.y0, bounds.x0);
+        while let Some(seed) = self.next_unlabelled(&mut cursor, bounds) {
             next_id += 1;
             self.flood(seed, next_id);
             let (m, p) = (mask.as_slice(), predicted.as_slice());
@@ -560,6 +614,95 @@ mod tests {
             }
         }
         (components.labels, found)
+    }
+
+    #[test]
+    fn chunked_scans_match_the_reference_scans() {
+        let mut state = 4242u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as u32
+        };
+        // Hits from dense to absent, lengths around the chunk size.
+        for len in [0, 1, 31, 32, 33, 64, 100, 257] {
+            for one_in in [1, 5, 40, 1000, u32::MAX] {
+                let values: Vec<u32> = (0..len)
+                    .map(|_| {
+                        if next() % one_in == 0 {
+                            UNLABELLED
+                        } else {
+                            next() % 3
+                        }
+                    })
+                    .collect();
+                for start in [0, len / 3, len] {
+                    let hit = |l: u32| l == UNLABELLED;
+                    assert_eq!(
+                        position_chunked(&values[start..], hit),
+                        values[start..].iter().position(|&l| hit(l)),
+                        "len {len} one in {one_in} start {start}"
+                    );
+                }
+            }
+        }
+        for len in [0, 1, 31, 32, 33, 64, 100, 257] {
+            for one_in in [1, 5, 40, 1000, u32::MAX] {
+                let values: Vec<u8> = (0..len)
+                    .map(|_| {
+                        if next() % one_in == 0 {
+                            1 + (next() % 255) as u8
+                        } else {
+                            0
+                        }
+                    })
+                    .collect();
+                for start in [0, len / 3, len] {
+                    assert_eq!(
+                        position_nonzero_u8(&values[start..]),
+                        values[start..].iter().position(|&v| v != 0),
+                        "len {len} one in {one_in} start {start}"
+                    );
+                }
+            }
+        }
+        // Seeds inside boxes: the cursor walk visits the box's unlabelled pixels in row-major order.
+        let size = ImageSize::new(75, 21);
+        let mut components = Components::new(size);
+        for l in components.labels.iter_mut() {
+            *l = if next() % 7 == 0 { UNLABELLED } else { next() % 4 };
+        }
+        for bounds in [
+            PixelBounds {
+                x0: 0,
+                x1: 74,
+                y0: 0,
+                y1: 20,
+            },
+            PixelBounds {
+                x0: 3,
+                x1: 40,
+                y0: 5,
+                y1: 5,
+            },
+            PixelBounds {
+                x0: 33,
+                x1: 74,
+                y0: 2,
+                y1: 19,
+            },
+        ] {
+            let expected: Vec<usize> = (bounds.y0..=bounds.y1)
+                .flat_map(|y| (bounds.x0..=bounds.x1).map(move |x| y * size.width + x))
+                .filter(|&i| components.labels[i] == UNLABELLED)
+                .collect();
+            let mut cursor = (bounds.y0, bounds.x0);
+            let found: Vec<usize> =
+                std::iter::from_fn(|| components.next_unlabelled(&mut cursor, bounds)).collect();
+            assert!(!expected.is_empty());
+            assert_eq!(found, expected, "{bounds:?}");
+        }
     }
 
     #[test]

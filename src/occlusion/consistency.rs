@@ -80,6 +80,102 @@ pub fn depth_consistency(
     })
 }
 
+/// [`depth_consistency`] of `current_from_previous` and of the identity (no motion) in one pass
+/// over the samples, with the same results bit for bit (tested): `(motion, identity)`.
+///
+/// No motion needs no projection: the identity moves the back-projected point by exactly nothing
+/// (the rotation matrix holds exact 1s and 0s), so the point's depth is the sample's own and its
+/// projection rounds back to the sample's pixel (the round trip is off by ≈ 1e-12 px). The
+/// motion's warp takes the per-column and per-row ray factors (x − cx)/fx and (y − cy)/fy from
+/// tables (`column_rays`, `row_rays`: scratch, resized here) instead of dividing per sample; the
+/// arithmetic is otherwise [`depth_consistency`]'s.
+#[allow(clippy::too_many_arguments)]
+pub fn depth_consistency_with_identity(
+    intrinsics: &PinholeIntrinsics,
+    previous_depth_m: &DepthMeters,
+    previous_mask: Option<&Mask>,
+    current_depth_m: &DepthMeters,
+    current_from_previous: &Isometry3<f64>,
+    stride: usize,
+    column_rays: &mut Vec<f64>,
+    row_rays: &mut Vec<f64>,
+) -> (Option<Consistency>, Option<Consistency>) {
+    let previous_from_current = current_from_previous.inverse();
+    let rotation = previous_from_current.rotation.to_rotation_matrix().into_inner();
+    let translation = previous_from_current.translation.vector;
+    let (width, height) = (current_depth_m.width(), current_depth_m.height());
+    let mask_size_differs = previous_mask.is_some_and(|m| m.size() != current_depth_m.size());
+    if width == 0 || height == 0 || previous_depth_m.size() != current_depth_m.size() || mask_size_differs {
+        return (None, None);
+    }
+    let stride = stride.max(1);
+    column_rays.clear();
+    column_rays.extend(
+        (0..width)
+            .step_by(stride)
+            .map(|x| (x as f64 - intrinsics.cx) / intrinsics.fx),
+    );
+    row_rays.clear();
+    row_rays.extend(
+        (0..height)
+            .step_by(stride)
+            .map(|y| (y as f64 - intrinsics.cy) / intrinsics.fy),
+    );
+    let (max_x, max_y) = ((width - 1) as f64, (height - 1) as f64);
+    let agree = |z_previous: f64, z: f64| {
+        let tolerance = (RELATIVE_TOLERANCE * z).max(MIN_TOLERANCE_M);
+        (z_previous - z).abs() <= tolerance
+    };
+    let (mut agreeing, mut compared) = (0usize, 0usize);
+    let (mut agreeing_still, mut compared_still) = (0usize, 0usize);
+    for (y, &ray_y) in (0..height).step_by(stride).zip(row_rays.iter()) {
+        let row = current_depth_m.row(y);
+        let previous_row = previous_depth_m.row(y);
+        let mask_row = previous_mask.map(|m| m.row(y));
+        for (x, &ray_x) in (0..width).step_by(stride).zip(column_rays.iter()) {
+            let z = f64::from(row[x]);
+            if z <= 0.0 {
+                continue;
+            }
+            // No motion: the sample's own pixel (the warp of a non-finite depth is NaN, never
+            // inside the image).
+            let z_previous = f64::from(previous_row[x]);
+            if z.is_finite() && z_previous > 0.0 && mask_row.is_none_or(|m| m[x] == 0) {
+                compared_still += 1;
+                agreeing_still += usize::from(agree(z_previous, z));
+            }
+            // The motion: `intrinsics.back_project(x, y, z)` with the tabulated factors.
+            let point = nalgebra::Vector3::new(ray_x * z, ray_y * z, z);
+            let q = rotation * point + translation;
+            if q.z <= 0.0 {
+                continue;
+            }
+            // `nearest_pixel`, i.e. `intrinsics.project` rounded.
+            let u = (intrinsics.fx * q.x / q.z + intrinsics.cx).round();
+            let v = (intrinsics.fy * q.y / q.z + intrinsics.cy).round();
+            if !(u >= 0.0 && v >= 0.0 && u <= max_x && v <= max_y) {
+                continue;
+            }
+            let (u, v) = (u as usize, v as usize);
+            let z_previous = f64::from(previous_depth_m.row(v)[u]);
+            if z_previous <= 0.0 || previous_mask.is_some_and(|m| m.row(v)[u] != 0) {
+                continue;
+            }
+            compared += 1;
+            agreeing += usize::from(agree(z_previous, q.z));
+        }
+    }
+    let sampled = height.div_ceil(stride) * width.div_ceil(stride);
+    let result = |agreeing: usize, compared: usize| {
+        (compared > 0).then(|| Consistency {
+            agreeing_fraction: agreeing as f64 / compared as f64,
+            compared,
+            sampled,
+        })
+    };
+    (result(agreeing, compared), result(agreeing_still, compared_still))
+}
+
 /// The pixel nearest to the projection of `point`, if it is in front of the camera and inside
 /// [0, W−1] × [0, H−1].
 fn nearest_pixel(

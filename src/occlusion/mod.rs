@@ -44,14 +44,14 @@ use nalgebra::Isometry3;
 
 use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
-use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, MASK_SET};
+use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
 
 use rayon::prelude::*;
 
 use components::Components;
 use growth::AppearanceGrowth;
 pub use growth::AppearanceGrowthConfig;
-use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch, UNLABELLED};
+use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch};
 
 /// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -291,6 +291,8 @@ pub struct OcclusionDetector {
     /// Appearance-gated object completion state (previous gray image, growth buffers).
     growth: AppearanceGrowth,
     stats: OcclusionStats,
+    /// Ray-factor tables of the motion check (per sampled column, per sampled row).
+    motion_check_rays: (Vec<f64>, Vec<f64>),
     /// Use the f64 scalar reference transport instead of the fast kernel (agreement tests).
     reference_transport: bool,
 }
@@ -341,6 +343,10 @@ impl OcclusionDetector {
             components: Components::new(size),
             growth: AppearanceGrowth::new(size),
             stats: OcclusionStats::default(),
+            motion_check_rays: (
+                Vec::with_capacity(size.width.div_ceil(MOTION_CHECK_STRIDE)),
+                Vec::with_capacity(size.height.div_ceil(MOTION_CHECK_STRIDE)),
+            ),
             reference_transport: false,
         })
     }
@@ -474,20 +480,17 @@ impl OcclusionDetector {
         let Some(margin) = self.config.motion_check_margin else {
             return false;
         };
-        let consistency = |motion: &Isometry3<f64>| {
-            consistency::depth_consistency(
-                &self.intrinsics,
-                &self.compensated_m,
-                Some(&self.mask),
-                depth_m,
-                motion,
-                MOTION_CHECK_STRIDE,
-            )
-        };
-        let (Some(moved), Some(still)) = (
-            consistency(current_from_previous),
-            consistency(&Isometry3::identity()),
-        ) else {
+        let (moved, still) = consistency::depth_consistency_with_identity(
+            &self.intrinsics,
+            &self.compensated_m,
+            Some(&self.mask),
+            depth_m,
+            current_from_previous,
+            MOTION_CHECK_STRIDE,
+            &mut self.motion_check_rays.0,
+            &mut self.motion_check_rays.1,
+        );
+        let (Some(moved), Some(still)) = (moved, still) else {
             return false;
         };
         let (moved, still, compared, sampled) = (
@@ -623,7 +626,8 @@ struct ObjectCounts {
 }
 
 /// Steps 11–12 input, row-parallel: O = {A > τ_α} into `mask`, P = (P̂ ∨ Ñ) ∧ O into
-/// `predicted` (all 0 when prediction is off), and `labels` = [`UNLABELLED`] on P, 0 elsewhere.
+/// `predicted` (all 0 when prediction is off), and `labels` = [`transport::UNLABELLED`] on P,
+/// 0 elsewhere.
 #[allow(clippy::too_many_arguments)]
 fn object_mask(
     config: &OcclusionConfig,
@@ -637,7 +641,12 @@ fn object_mask(
 ) -> ObjectCounts {
     let width = mask.width();
     let chunk = transport::ROWS_PER_TASK * width;
-    let predicting = config.predict_newly_discovered;
+    let simd = transport::Simd::detect();
+    let parameters = transport::ObjectMaskParameters {
+        quadratic: config.threshold_form == ThresholdForm::Quadratic,
+        alpha: config.alpha,
+        predicting: config.predict_newly_discovered,
+    };
     mask.as_mut_slice()
         .par_chunks_mut(chunk)
         .zip(predicted.as_mut_slice().par_chunks_mut(chunk))
@@ -647,34 +656,19 @@ fn object_mask(
             let mut counts = ObjectCounts::default();
             let start = task * chunk;
             let end = start + m_rows.len();
-            let a = &accumulation_m.as_slice()[start..end];
-            let z = &compensated_m.as_slice()[start..end];
-            let carried = &predicted_carried.as_slice()[start..end];
-            let newly = &newly_discovered.as_slice()[start..end];
-            let (p_rows, label_rows) = (&mut p_rows[..m_rows.len()], &mut label_rows[..m_rows.len()]);
-            // Single-width loops so each vectorises: f32 → u8 mask, u8 → u8 P, u8 → u32 labels.
-            let quadratic = config.threshold_form == ThresholdForm::Quadratic;
-            let alpha = config.alpha;
-            let mut object_count = 0u32;
-            for i in 0..m_rows.len() {
-                // (α·Z)·Z or (α·Z)·1: exactly `OcclusionConfig::threshold`.
-                let z_or_one = if quadratic { z[i] } else { 1.0 };
-                let object = a[i] > alpha * z[i] * z_or_one;
-                m_rows[i] = if object { MASK_SET } else { 0 };
-                object_count += u32::from(object);
-            }
+            let (object_count, predicted_count) = transport::object_mask_block_with(
+                simd,
+                &parameters,
+                &accumulation_m.as_slice()[start..end],
+                &compensated_m.as_slice()[start..end],
+                &predicted_carried.as_slice()[start..end],
+                &newly_discovered.as_slice()[start..end],
+                m_rows,
+                p_rows,
+                label_rows,
+            );
             counts.object = object_count as usize;
-            let keep = if predicting { u8::MAX } else { 0 };
-            let mut predicted_rows = 0u32;
-            for i in 0..m_rows.len() {
-                let is_predicted = m_rows[i] & (carried[i] | newly[i]) & keep != 0;
-                p_rows[i] = u8::from(is_predicted);
-                predicted_rows += u32::from(is_predicted);
-            }
-            for (label, &p) in label_rows.iter_mut().zip(p_rows.iter()) {
-                *label = if p != 0 { UNLABELLED } else { 0 };
-            }
-            if predicted_rows > 0 {
+            if predicted_count > 0 {
                 let y0 = start / width;
                 let y1 = end / width - 1;
                 counts.predicted_bounds = Some(PixelBounds {

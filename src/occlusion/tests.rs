@@ -2,8 +2,10 @@ use nalgebra::{Isometry3, Vector3};
 
 use super::transport::{
     transport, transport_scalar, transport_with, Simd, TransportInputs, TransportOutputs, TransportScratch,
+    UNLABELLED,
 };
 use super::*;
+use crate::image_buf::MASK_SET;
 use crate::synthetic::{DepthSensorModel, Scenario, SequenceConfig, SyntheticSequence};
 
 const SIZE: ImageSize = ImageSize::new(160, 120);
@@ -519,4 +521,145 @@ fn the_motion_check_does_not_judge_when_a_moving_object_fills_the_view() {
     detector.update(&depth, &Isometry3::identity()).unwrap();
     detector.update(&depth, &glitch).unwrap();
     assert!(detector.stats().motion_rejected, "{:?}", detector.stats());
+}
+
+#[test]
+fn the_one_pass_motion_check_matches_two_reference_checks() {
+    // Real synthetic frames (Kinect noise, invalid edges) with the object's mask, the true
+    // motion, a perturbed one, no motion and a 3° glitch, at several strides: the fused pass
+    // gives the reference's counts exactly, for the motion and for the identity.
+    let sequence_config = SequenceConfig {
+        size: SIZE,
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(Scenario::SmallObjectCrossing, sequence_config);
+    let k = sequence_config.intrinsics();
+    let (previous, current) = (sequence.frame(20), sequence.frame(21));
+    let mask = Image::from_fn(SIZE, |x, y| {
+        if previous.gt_mask.get(x, y) != 0 || (x + y) % 17 == 0 {
+            MASK_SET
+        } else {
+            0
+        }
+    });
+    let true_motion = sequence.current_from_previous(21);
+    let motions = [
+        true_motion,
+        true_motion * Isometry3::new(Vector3::new(0.02, -0.01, 0.03), Vector3::new(0.01, -0.02, 0.0)),
+        Isometry3::identity(),
+        Isometry3::new(Vector3::zeros(), Vector3::new(0.0, 3f64.to_radians(), 0.0)),
+    ];
+    let (mut columns, mut rows) = (Vec::new(), Vec::new());
+    let mut judged = 0;
+    for motion in &motions {
+        for stride in [1, 3, 8] {
+            for mask in [None, Some(&mask)] {
+                let reference = |m: &Isometry3<f64>| {
+                    consistency::depth_consistency(&k, &previous.depth_m, mask, &current.depth_m, m, stride)
+                };
+                let fused = consistency::depth_consistency_with_identity(
+                    &k,
+                    &previous.depth_m,
+                    mask,
+                    &current.depth_m,
+                    motion,
+                    stride,
+                    &mut columns,
+                    &mut rows,
+                );
+                assert_eq!(
+                    fused,
+                    (reference(motion), reference(&Isometry3::identity())),
+                    "stride {stride}"
+                );
+                judged += usize::from(fused.0.is_some_and(|c| c.agreeing_fraction < 1.0));
+            }
+        }
+    }
+    assert!(
+        judged > 12,
+        "the motions must be judged, with disagreeing samples: {judged}"
+    );
+}
+
+#[test]
+fn object_mask_builds_match_the_definition() {
+    // Random A around the threshold, depths with holes, P̂ and Ñ flags: the baseline and AVX2
+    // builds give exactly O = {A > τ_α}, P = (P̂ ∨ Ñ) ∧ O and the labels of P.
+    let len = 1000;
+    let mut state = 77u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 33) % 1000) as f32 / 1000.0
+    };
+    let z: Vec<f32> = (0..len)
+        .map(|_| if next() < 0.1 { 0.0 } else { 0.5 + 4.0 * next() })
+        .collect();
+    let a: Vec<f32> = z
+        .iter()
+        .map(|&z| if next() < 0.3 { 0.0 } else { 0.3 * z * next() * z })
+        .collect();
+    let carried: Vec<u8> = (0..len).map(|_| u8::from(next() < 0.2)).collect();
+    let newly: Vec<u8> = (0..len).map(|_| u8::from(next() < 0.2)).collect();
+    for (threshold_form, predicting) in [
+        (ThresholdForm::Linear, true),
+        (ThresholdForm::Quadratic, true),
+        (ThresholdForm::Linear, false),
+    ] {
+        let config = OcclusionConfig {
+            threshold_form,
+            predict_newly_discovered: predicting,
+            ..OcclusionConfig::default()
+        };
+        let parameters = transport::ObjectMaskParameters {
+            quadratic: threshold_form == ThresholdForm::Quadratic,
+            alpha: config.alpha,
+            predicting,
+        };
+        let run = |simd: Simd| {
+            let (mut mask, mut predicted, mut labels) = (vec![9u8; len], vec![9u8; len], vec![9u32; len]);
+            let counts = transport::object_mask_block_with(
+                simd,
+                &parameters,
+                &a,
+                &z,
+                &carried,
+                &newly,
+                &mut mask,
+                &mut predicted,
+                &mut labels,
+            );
+            (counts, mask, predicted, labels)
+        };
+        let object: Vec<bool> = (0..len)
+            .map(|i| a[i] > config.threshold(config.alpha, z[i]))
+            .collect();
+        let is_predicted: Vec<bool> = (0..len)
+            .map(|i| predicting && object[i] && (carried[i] != 0 || newly[i] != 0))
+            .collect();
+        let expected = (
+            (
+                object.iter().filter(|&&o| o).count() as u32,
+                is_predicted.iter().filter(|&&p| p).count() as u32,
+            ),
+            object
+                .iter()
+                .map(|&o| if o { MASK_SET } else { 0 })
+                .collect::<Vec<u8>>(),
+            is_predicted.iter().map(|&p| u8::from(p)).collect::<Vec<u8>>(),
+            is_predicted
+                .iter()
+                .map(|&p| if p { UNLABELLED } else { 0 })
+                .collect::<Vec<u32>>(),
+        );
+        assert!(
+            expected.0 .0 > 100 && (expected.0 .1 > 20 || !predicting),
+            "{:?}",
+            expected.0
+        );
+        assert_eq!(run(Simd::Baseline), expected, "{threshold_form:?} {predicting}");
+        assert_eq!(run(Simd::Avx2), expected, "{threshold_form:?} {predicting}");
+    }
 }

@@ -693,7 +693,9 @@ fn flags_block_generic(
     for i in 0..len {
         let newly = (zc_row[i] > 0.0) & (sampled[i] == 0.0);
         newly_row[i] = u8::from(newly);
-        p_row[i] = if sources[i] != NO_SOURCE { carried_p[i] } else { 0 };
+        // An unconditional load masked by a select (a conditional load keeps the loop scalar).
+        let keep = if sources[i] != NO_SOURCE { u8::MAX } else { 0 };
+        p_row[i] = carried_p[i] & keep;
         newly_count += u32::from(newly);
     }
     newly_count
@@ -712,6 +714,110 @@ simd_kernel!(
         p_row: &mut [u8]
     ) -> u32
 );
+
+/// Thresholds of the object-mask pass (steps 11–12).
+pub(super) struct ObjectMaskParameters {
+    /// τ = α·Z² instead of α·Z.
+    pub quadratic: bool,
+    /// α of τ_α.
+    pub alpha: f32,
+    /// Prediction on: P = (P̂ ∨ Ñ) ∧ O; off: P = ∅.
+    pub predicting: bool,
+}
+
+/// Steps 11–12 input on a run of pixels: O = {A > τ_α} into `mask` (0 / `MASK_SET`), P = (P̂ ∨ Ñ)
+/// ∧ O into `predicted` (0 / 1) and the pruning's labels ([`UNLABELLED`] on P, 0 elsewhere).
+/// Returns (|O|, |P|). Single-width loops so each vectorises.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn object_mask_block_generic(
+    parameters: &ObjectMaskParameters,
+    accumulation_m: &[f32],
+    compensated_m: &[f32],
+    carried: &[u8],
+    newly: &[u8],
+    mask: &mut [u8],
+    predicted: &mut [u8],
+    labels: &mut [u32],
+) -> (u32, u32) {
+    let len = mask.len();
+    let (a, z, carried, newly) = (
+        &accumulation_m[..len],
+        &compensated_m[..len],
+        &carried[..len],
+        &newly[..len],
+    );
+    let (predicted, labels) = (&mut predicted[..len], &mut labels[..len]);
+    let (quadratic, alpha) = (parameters.quadratic, parameters.alpha);
+    let mut object_count = 0u32;
+    for i in 0..len {
+        // (α·Z)·Z or (α·Z)·1: exactly `OcclusionConfig::threshold`.
+        let z_or_one = if quadratic { z[i] } else { 1.0 };
+        let object = a[i] > alpha * z[i] * z_or_one;
+        mask[i] = if object { crate::image_buf::MASK_SET } else { 0 };
+        object_count += u32::from(object);
+    }
+    let keep = if parameters.predicting { u8::MAX } else { 0 };
+    let mut predicted_count = 0u32;
+    for i in 0..len {
+        let is_predicted = mask[i] & (carried[i] | newly[i]) & keep != 0;
+        predicted[i] = u8::from(is_predicted);
+        predicted_count += u32::from(is_predicted);
+    }
+    for i in 0..len {
+        // P is 0 or 1: 0 − P is 0 or `UNLABELLED` (u32::MAX).
+        labels[i] = 0u32.wrapping_sub(u32::from(predicted[i]));
+    }
+    (object_count, predicted_count)
+}
+
+simd_kernel!(
+    object_mask_block,
+    object_mask_block_avx2,
+    object_mask_block_generic,
+    (
+        parameters: &ObjectMaskParameters,
+        accumulation_m: &[f32],
+        compensated_m: &[f32],
+        carried: &[u8],
+        newly: &[u8],
+        mask: &mut [u8],
+        predicted: &mut [u8],
+        labels: &mut [u32]
+    ) -> (u32, u32)
+);
+
+/// [`object_mask_block_generic`] in the given build (`Simd::Avx2` only when [`Simd::detect`]
+/// says so; anything else runs the baseline build).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn object_mask_block_with(
+    simd: Simd,
+    parameters: &ObjectMaskParameters,
+    accumulation_m: &[f32],
+    compensated_m: &[f32],
+    carried: &[u8],
+    newly: &[u8],
+    mask: &mut [u8],
+    predicted: &mut [u8],
+    labels: &mut [u32],
+) -> (u32, u32) {
+    let simd = if simd == Simd::Avx2 {
+        Simd::detect()
+    } else {
+        Simd::Baseline
+    };
+    object_mask_block(
+        simd,
+        parameters,
+        accumulation_m,
+        compensated_m,
+        carried,
+        newly,
+        mask,
+        predicted,
+        labels,
+    )
+}
 
 /// Reference implementation: the algorithm.md §1 steps as separate full-image passes, with f64
 /// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
