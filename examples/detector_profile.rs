@@ -1,8 +1,8 @@
 //! Per-stage wall time and process CPU time of the occlusion detector alone, on the synthetic
 //! dominant-object sequence at 640×480 (the frames of `benches/occlusion.rs`). CPU time is the
 //! steadier figure on a shared machine. Run:
-//! `cargo run --release --example detector_profile [-- ROUNDS [FRAMES_CACHE]]` (RAYON_NUM_THREADS=1
-//! for one core). With FRAMES_CACHE (a file path) the rendered frames are saved there on the first
+//! `cargo run --release --example detector_profile [-- ROUNDS [FRAMES_CACHE [paper]]]`
+//! (RAYON_NUM_THREADS=1 for one core; `paper` turns the appearance growth off). With FRAMES_CACHE (a file path) the rendered frames are saved there on the first
 //! run and read back afterwards: rendering costs ≈ 35 G instructions, 15× the detector's, which
 //! matters under `valgrind --tool=callgrind`.
 
@@ -12,7 +12,7 @@
 use std::time::Instant;
 
 use nalgebra::Isometry3;
-use occmask::image_buf::{DepthMeters, ImageSize};
+use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
 use occmask::occlusion::{OcclusionConfig, OcclusionDetector};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
@@ -40,12 +40,19 @@ fn main() {
         ..SequenceConfig::default()
     };
     let sequence = SyntheticSequence::new(Scenario::DominantObject, config);
-    let cache = std::env::args().nth(2).map(std::path::PathBuf::from);
+    let cache = std::env::args()
+        .nth(2)
+        .filter(|a| !a.is_empty())
+        .map(std::path::PathBuf::from);
+    let paper = std::env::args().nth(3).is_some_and(|a| a == "paper");
     let frames = match cache.as_deref().and_then(|path| std::fs::read(path).ok()) {
         Some(bytes) => decode_frames(&bytes, size),
         None => {
-            let frames: Vec<(DepthMeters, Isometry3<f64>)> = (40..70)
-                .map(|i| (sequence.frame(i).depth_m, sequence.current_from_previous(i)))
+            let frames: Vec<Frame> = (40..70)
+                .map(|i| {
+                    let frame = sequence.frame(i);
+                    (frame.depth_m, frame.gray, sequence.current_from_previous(i))
+                })
                 .collect();
             if let Some(path) = &cache {
                 std::fs::write(path, encode_frames(&frames)).unwrap();
@@ -53,58 +60,84 @@ fn main() {
             frames
         }
     };
-    let mut detector = OcclusionDetector::new(size, config.intrinsics(), OcclusionConfig::default()).unwrap();
-    for (depth, motion) in &frames {
-        detector.update(depth, motion).unwrap();
+    let detector_config = OcclusionConfig {
+        appearance_growth: if paper {
+            None
+        } else {
+            OcclusionConfig::default().appearance_growth
+        },
+        ..OcclusionConfig::default()
+    };
+    let mut detector = OcclusionDetector::new(size, config.intrinsics(), detector_config).unwrap();
+    for (depth, gray, motion) in &frames {
+        detector.update_with_gray(depth, Some(gray), motion).unwrap();
     }
-    let (mut transport, mut label, mut prune, mut updates) = (0u64, 0u64, 0u64, 0u64);
+    let (mut transport, mut label, mut prune, mut growth, mut updates) = (0u64, 0u64, 0u64, 0u64, 0u64);
+    let (mut mask_pixels, mut grown_pixels) = (0usize, 0usize);
     let (cpu0, wall0) = (cpu_seconds(), Instant::now());
     for _ in 0..rounds {
         detector.reset();
-        for (depth, motion) in &frames {
-            detector.update(depth, motion).unwrap();
+        for (depth, gray, motion) in &frames {
+            detector.update_with_gray(depth, Some(gray), motion).unwrap();
             let s = detector.stats();
             transport += s.transport_us;
             label += s.label_predict_us;
             prune += s.prune_us;
+            growth += s.growth_us;
+            mask_pixels += s.mask_pixels;
+            grown_pixels += s.grown_pixels;
         }
         updates += frames.len() as u64;
     }
     let (cpu, wall) = (cpu_seconds() - cpu0, wall0.elapsed().as_secs_f64());
     let per = |us: u64| us as f64 / 1000.0 / updates as f64;
     println!(
-        "{updates} updates at {size}: wall {:.2} ms/frame, CPU {:.2} ms/frame; stages (wall): transport {:.2}, label+predict {:.2}, mask+prune {:.2} ms",
+        "{updates} updates at {size} ({}): wall {:.2} ms/frame, CPU {:.2} ms/frame; stages (wall): \
+         transport {:.2}, label+predict {:.2}, mask+prune {:.2}, growth {:.2} ms; mean mask {} px, \
+         grown {} px",
+        if paper {
+            "paper"
+        } else {
+            "default: appearance growth"
+        },
         wall * 1000.0 / updates as f64,
         cpu * 1000.0 / updates as f64,
         per(transport),
         per(label),
-        per(prune)
+        per(prune),
+        per(growth),
+        mask_pixels / updates.max(1) as usize,
+        grown_pixels / updates.max(1) as usize,
     );
 }
 
+/// Depth, gray and the camera motion of one frame.
+type Frame = (DepthMeters, GrayF32, Isometry3<f64>);
+
 /// Per frame: the motion's translation and unit quaternion (i, j, k, w) as 7 f64 (exact), then the
-/// depth (f32), all little-endian.
-fn encode_frames(frames: &[(DepthMeters, Isometry3<f64>)]) -> Vec<u8> {
+/// depth and the gray image (f32), all little-endian.
+fn encode_frames(frames: &[Frame]) -> Vec<u8> {
     let mut bytes = Vec::new();
-    for (depth, motion) in frames {
+    for (depth, gray, motion) in frames {
         let (t, q) = (motion.translation.vector, motion.rotation.coords);
         for v in t.iter().chain(q.iter()) {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
-        for v in depth.as_slice() {
+        for v in depth.as_slice().iter().chain(gray.as_slice()) {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
     }
     bytes
 }
 
-fn decode_frames(bytes: &[u8], size: ImageSize) -> Vec<(DepthMeters, Isometry3<f64>)> {
-    let frame_bytes = 7 * 8 + size.area() * 4;
+fn decode_frames(bytes: &[u8], size: ImageSize) -> Vec<Frame> {
+    let frame_bytes = 7 * 8 + 2 * size.area() * 4;
     assert_eq!(bytes.len() % frame_bytes, 0, "frames cache of another size");
     bytes
         .chunks_exact(frame_bytes)
         .map(|frame| {
-            let (pose, depth) = frame.split_at(7 * 8);
+            let (pose, images) = frame.split_at(7 * 8);
+            let (depth, gray) = images.split_at(size.area() * 4);
             let p: Vec<f64> = pose
                 .chunks_exact(8)
                 .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
@@ -113,11 +146,16 @@ fn decode_frames(bytes: &[u8], size: ImageSize) -> Vec<(DepthMeters, Isometry3<f
                 nalgebra::Translation3::new(p[0], p[1], p[2]),
                 nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(p[6], p[3], p[4], p[5])),
             );
-            let depth: Vec<f32> = depth
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-                .collect();
-            (DepthMeters::from_vec(size, depth).unwrap(), motion)
+            let floats = |b: &[u8]| -> Vec<f32> {
+                b.chunks_exact(4)
+                    .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                    .collect()
+            };
+            (
+                DepthMeters::from_vec(size, floats(depth)).unwrap(),
+                GrayF32::from_vec(size, floats(gray)).unwrap(),
+                motion,
+            )
         })
         .collect()
 }
