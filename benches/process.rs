@@ -17,13 +17,13 @@ use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::McapWriteOptions;
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
-use occmask::process::{pipeline_factory, process_file, NoHooks, ProcessConfig};
+use occmask::process::{pipeline_factory, process_file, NoHooks, PipelineOptions, ProcessConfig};
 
 /// Criterion's minimum sample count: one iteration processes 50 VGA frames.
 const SAMPLES: usize = 10;
 
 fn process_once(input: &McapInput) -> u64 {
-    let mut factory = pipeline_factory(false);
+    let mut factory = pipeline_factory(PipelineOptions::default());
     let (_, report) = process_file(
         input,
         Cursor::new(Vec::with_capacity(64 << 20)),

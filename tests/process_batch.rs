@@ -13,7 +13,7 @@ use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::McapWriteOptions;
 use occmask::process::batch::{run_batch, ThreadBudget};
-use occmask::process::{pipeline_factory, process_file, NoHooks, PoseMode, ProcessConfig};
+use occmask::process::{pipeline_factory, process_file, NoHooks, PipelineOptions, PoseMode, ProcessConfig};
 
 /// About 12 frames at 30 Hz (TUM's stamps are not exactly periodic): enough for DVO, the detector's accumulation and its prediction to act.
 const DURATION_NS: u64 = 400_000_000;
@@ -52,7 +52,7 @@ fn process(path: &Path, mode: PoseMode) -> (Vec<u8>, u64) {
         &input,
         Cursor::new(Vec::new()),
         &config,
-        &mut pipeline_factory(false),
+        &mut pipeline_factory(PipelineOptions::default()),
         &mut NoHooks,
     )
     .unwrap();

@@ -15,7 +15,7 @@ use occmask::evaluate::{evaluate, format_report};
 use occmask::image_buf::ImageSize;
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::{AtomicOutput, McapWriteOptions};
-use occmask::process::{pipeline_factory, process_file, ProcessConfig, ProcessHooks};
+use occmask::process::{pipeline_factory, process_file, PipelineOptions, ProcessConfig, ProcessHooks};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
 use super::{Globals, Outcome};
@@ -107,7 +107,7 @@ pub fn run(args: DemoArgs, globals: &Globals) -> anyhow::Result<Outcome> {
 
     // 2. `occmask process` on it: DVO closed loop + occlusion accumulation.
     let input = McapInput::open(&input_path.0)?;
-    let mut factory = pipeline_factory(false);
+    let mut factory = pipeline_factory(PipelineOptions::default());
     let (sink, report) = process_file(
         &input,
         BufWriter::new(file),
