@@ -7,7 +7,8 @@ use super::{Adjacency, OcclusionConfig};
 use crate::image_buf::{DepthMeters, Image, ImageSize, Mask};
 
 const NEIGHBOURS_4: [(isize, isize); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
-const NEIGHBOURS_8: [(isize, isize); 8] = [
+/// The 8 neighbours as (dx, dy).
+pub(super) const NEIGHBOURS_8: [(isize, isize); 8] = [
     (-1, -1),
     (0, -1),
     (1, -1),

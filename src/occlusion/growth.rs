@@ -31,6 +31,7 @@
 
 use nalgebra::Isometry3;
 
+use super::components::NEIGHBOURS_8;
 use super::OcclusionConfig;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, MASK_SET};
@@ -112,18 +113,6 @@ impl AppearanceGrowthConfig {
         Ok(())
     }
 }
-
-/// The 8 neighbours as (dx, dy).
-const NEIGHBOURS_8: [(isize, isize); 8] = [
-    (-1, -1),
-    (0, -1),
-    (1, -1),
-    (-1, 0),
-    (1, 0),
-    (-1, 1),
-    (0, 1),
-    (1, 1),
-];
 
 /// Preallocated state of the growth: the previous gray image and BFS buffers.
 #[derive(Debug, Clone)]
@@ -242,7 +231,8 @@ impl AppearanceGrowth {
         let previous = self.previous_gray.as_slice();
         let current = gray.as_slice();
         let z = depth_m.as_slice();
-        let changed = |n: usize| -> bool {
+        // Pixel n (current depth) in the previous image, None behind the previous camera.
+        let warp = |n: usize| -> Option<(f32, f32)> {
             let (x, y) = ((n % width) as f32, (n / width) as f32);
             let zn = z[n];
             let p = [(x - cx) / fx * zn, (y - cy) / fy * zn, zn];
@@ -251,10 +241,12 @@ impl AppearanceGrowth {
                 r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
                 r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2],
             ];
-            if q[2] <= 0.0 {
+            (q[2] > 0.0).then(|| (fx * q[0] / q[2] + cx, fy * q[1] / q[2] + cy))
+        };
+        let changed = |n: usize| -> bool {
+            let Some((u, v)) = warp(n) else {
                 return false;
-            }
-            let (u, v) = (fx * q[0] / q[2] + cx, fy * q[1] / q[2] + cy);
+            };
             // Bilinear needs the 2×2 neighbourhood; a pixel warped outside has no evidence.
             if !(u >= 0.0 && v >= 0.0 && u < (width - 1) as f32 && v < (height - 1) as f32) {
                 return false;
@@ -291,17 +283,10 @@ impl AppearanceGrowth {
             if zn <= 0.0 || !previous_mask_valid {
                 return false;
             }
-            let (x, y) = ((n % width) as f32, (n / width) as f32);
-            let p = [(x - cx) / fx * zn, (y - cy) / fy * zn, zn];
-            let q = [
-                r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0],
-                r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
-                r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2],
-            ];
-            if q[2] <= 0.0 {
+            let Some((u, v)) = warp(n) else {
                 return false;
-            }
-            let (u, v) = (fx * q[0] / q[2] + cx + 0.5, fy * q[1] / q[2] + cy + 0.5);
+            };
+            let (u, v) = (u + 0.5, v + 0.5);
             u >= 0.0
                 && v >= 0.0
                 && (u as usize) < width
