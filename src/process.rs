@@ -166,12 +166,14 @@ pub enum OdometryAnchor {
     /// first estimated pose is set to the channel's pose at the first frame (interpolated), so
     /// the estimated and ground-truth cameras start together in Foxglove's 3D panel and `world`
     /// means one frame in the whole file. Without the channel, or without a pose within
-    /// Without the channel (or with no poses on it), as [`OdometryAnchor::FirstCamera`]; with
-    /// poses but none within [`ProcessConfig::max_pose_gap_ns`] of the first frame, an error
-    /// that names `--no-anchor`.
+    /// Without the channel (or with no poses on it), as [`OdometryAnchor::FirstCamera`]; a
+    /// channel that does not decode is not used either (the reason goes to
+    /// [`ProcessReport::anchor_skipped`]: ground truth is not this command's input, and its
+    /// messages are copied unchanged); with poses but none within
+    /// [`ProcessConfig::max_pose_gap_ns`] of the first frame, an error that names `--no-anchor`.
     IfPresent(String),
-    /// Like [`OdometryAnchor::IfPresent`], but a missing channel is an error too
-    /// (`--anchor-topic`).
+    /// Like [`OdometryAnchor::IfPresent`], but a missing or undecodable channel is an error
+    /// too (`--anchor-topic`).
     Required(String),
 }
 
@@ -273,6 +275,9 @@ pub struct ProcessReport {
     /// Where the frame loop's wall-clock time went (never written to the output, so the
     /// output bytes stay deterministic).
     pub timings: LoopTimings,
+    /// Why the default [`OdometryAnchor`] channel was present but not used (it did not
+    /// decode); `None` when anchored or when there was nothing to anchor to.
+    pub anchor_skipped: Option<String>,
 }
 
 /// Where the frame loop's wall-clock time went, in seconds. The frame loop runs the pipeline;
@@ -645,7 +650,7 @@ fn load_anchor_poses(
         OdometryAnchor::Required(t) => (t, true),
     };
     let poses = read_poses(input, topic).map_err(|e| match e {
-        Error::Decode { topic, message } => Error::Decode {
+        Error::Decode { topic, message } if required => Error::Decode {
             topic,
             message: format!("{message} (anchor poses: pass --no-anchor to ignore the channel)"),
         },
@@ -755,7 +760,11 @@ pub fn process_file<W: Write + Seek + Send>(
     } else {
         Vec::new()
     };
-    let anchor_poses = load_anchor_poses(input, config)?;
+    let (anchor_poses, anchor_skipped) = match load_anchor_poses(input, config) {
+        Ok(poses) => (poses, None),
+        Err(e) if matches!(config.anchor, OdometryAnchor::IfPresent(_)) => (None, Some(e.to_string())),
+        Err(e) => return Err(e),
+    };
 
     let mut writer = AnnotatedWriter::new(sink, input, &config.annotate)?;
     let mut metadata = BTreeMap::from([
@@ -836,6 +845,7 @@ pub fn process_file<W: Write + Seek + Send>(
             out_of_order_frames: 0,
             last_timestamp_ns: None,
             timings: LoopTimings::default(),
+            anchor_skipped,
         },
     };
     let ctx = FrameContext {

@@ -751,8 +751,16 @@ fn eval_bad_inputs() {
     let nan_in = dir.join("nan_in.mcap");
     std::fs::write(&nan_in, edit_pose(|p| p.position.as_mut().unwrap().y = f64::NAN)).unwrap();
     let nan_out = dir.join("nan_out.mcap");
-    let out = occmask(&os(&[&"process", &nan_in, &"-o", &nan_out, &"-q"]));
+    let out = occmask(&os(&[&"process", &nan_in, &"-o", &nan_out]));
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    // The ground truth cannot anchor the odometry: processed anyway, and said so.
+    assert!(
+        stderr(&out).lines().any(|l| l.starts_with("warning: ")
+            && l.contains("the odometry starts at the first camera")
+            && l.contains("/groundtruth/pose")),
+        "{}",
+        stderr(&out)
+    );
     // A processed file cut inside its summary (a copy interrupted near the end).
     let full = dir.join("full.mcap");
     let out = occmask(&os(&[&"process", &raw, &"-o", &full, &"-q"]));

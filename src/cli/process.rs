@@ -576,6 +576,12 @@ fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
             rep.frames
         ));
     }
+    if let Some(why) = &rep.anchor_skipped {
+        out.push(format!(
+            "{}: the odometry starts at the first camera, not at the ground truth: {why}",
+            input.display()
+        ));
+    }
     if rep.out_of_order_frames > 0 {
         out.push(format!(
             "{}: skipped {} frame(s) whose colour stamp is not after the previous frame's \
