@@ -102,8 +102,9 @@ fn print_frame(i: usize, c: &FrameCounts, s: &OcclusionStats) {
     );
 }
 
-/// Depth in gray, true positives green, false positives red, false negatives blue.
-fn dump_errors(path: &Path, depth: &DepthMeters, mask: &Mask, truth: &Mask) {
+/// Depth in gray, true positives green, false positives red, false negatives blue; without
+/// `truth` (real data: nothing moves) every mask pixel is a false positive.
+fn dump_errors(path: &Path, depth: &DepthMeters, mask: &Mask, truth: Option<&Mask>) {
     let mut out = image::RgbImage::new(depth.width() as u32, depth.height() as u32);
     for y in 0..depth.height() {
         for x in 0..depth.width() {
@@ -113,7 +114,7 @@ fn dump_errors(path: &Path, depth: &DepthMeters, mask: &Mask, truth: &Mask) {
             } else {
                 0
             };
-            let p = match (mask.get(x, y) != 0, truth.get(x, y) != 0) {
+            let p = match (mask.get(x, y) != 0, truth.is_some_and(|t| t.get(x, y) != 0)) {
                 (true, true) => [g / 3, 255, g / 3],
                 (true, false) => [255, g / 3, g / 3],
                 (false, true) => [g / 3, g / 3, 255],
@@ -214,7 +215,7 @@ fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path
                 &d.join(format!("{}_{i:03}.png", scenario.name())),
                 &frame.depth_m,
                 mask,
-                &frame.gt_mask,
+                Some(&frame.gt_mask),
             );
         }
     }
@@ -242,27 +243,6 @@ fn list(dir: &Path, file: &str) -> Vec<(u64, PathBuf)> {
             (t, dir.join(fields.next().unwrap()))
         })
         .collect()
-}
-
-fn dump(path: &Path, depth: &DepthMeters, mask: &Mask) {
-    let mut out = image::RgbImage::new(depth.width() as u32, depth.height() as u32);
-    for y in 0..depth.height() {
-        for x in 0..depth.width() {
-            let z = depth.get(x, y);
-            let g = if z > 0.0 {
-                (255.0 * (1.0 - (z / 5.0).min(1.0))) as u8
-            } else {
-                0
-            };
-            let p = if mask.get(x, y) != 0 {
-                [255, g / 3, g / 3]
-            } else {
-                [g, g, g]
-            };
-            out.put_pixel(x as u32, y as u32, image::Rgb(p));
-        }
-    }
-    out.save(path).unwrap();
 }
 
 fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Option<&Path>) {
@@ -330,7 +310,7 @@ fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Optio
         }
         if let Some(d) = dump_dir {
             if set > 0 && i >= WARM_UP_FRAMES {
-                dump(&d.join(format!("{i:04}.png")), &depth, detector.mask());
+                dump_errors(&d.join(format!("{i:04}.png")), &depth, detector.mask(), None);
             }
         }
         fractions.push(fraction);

@@ -40,16 +40,19 @@ pub fn depth_consistency(
     current_from_previous: &Isometry3<f64>,
     stride: usize,
 ) -> Option<Consistency> {
-    // The rotation as a matrix: 9 multiply-adds per point instead of a quaternion product.
-    let previous_from_current = current_from_previous.inverse();
-    let rotation = previous_from_current.rotation.to_rotation_matrix().into_inner();
-    let translation = previous_from_current.translation.vector;
-    let (width, height) = (current_depth_m.width(), current_depth_m.height());
-    let mask_size_differs = previous_mask.is_some_and(|m| m.size() != current_depth_m.size());
-    if width == 0 || height == 0 || previous_depth_m.size() != current_depth_m.size() || mask_size_differs {
-        return None;
-    }
-    let stride = stride.max(1);
+    let Warp {
+        rotation,
+        translation,
+        width,
+        height,
+        stride,
+    } = Warp::new(
+        previous_depth_m,
+        previous_mask,
+        current_depth_m,
+        current_from_previous,
+        stride,
+    )?;
     let (mut agreeing, mut compared) = (0usize, 0usize);
     for y in (0..height).step_by(stride) {
         let row = current_depth_m.row(y);
@@ -72,12 +75,11 @@ pub fn depth_consistency(
             agreeing += usize::from((z_previous - q.z).abs() <= tolerance);
         }
     }
-    let sampled = height.div_ceil(stride) * width.div_ceil(stride);
-    (compared > 0).then(|| Consistency {
-        agreeing_fraction: agreeing as f64 / compared as f64,
+    Consistency::from_counts(
+        agreeing,
         compared,
-        sampled,
-    })
+        height.div_ceil(stride) * width.div_ceil(stride),
+    )
 }
 
 /// [`depth_consistency`] of `current_from_previous` and of the identity (no motion) in one pass
@@ -100,15 +102,22 @@ pub fn depth_consistency_with_identity(
     column_rays: &mut Vec<f64>,
     row_rays: &mut Vec<f64>,
 ) -> (Option<Consistency>, Option<Consistency>) {
-    let previous_from_current = current_from_previous.inverse();
-    let rotation = previous_from_current.rotation.to_rotation_matrix().into_inner();
-    let translation = previous_from_current.translation.vector;
-    let (width, height) = (current_depth_m.width(), current_depth_m.height());
-    let mask_size_differs = previous_mask.is_some_and(|m| m.size() != current_depth_m.size());
-    if width == 0 || height == 0 || previous_depth_m.size() != current_depth_m.size() || mask_size_differs {
+    let Some(Warp {
+        rotation,
+        translation,
+        width,
+        height,
+        stride,
+    }) = Warp::new(
+        previous_depth_m,
+        previous_mask,
+        current_depth_m,
+        current_from_previous,
+        stride,
+    )
+    else {
         return (None, None);
-    }
-    let stride = stride.max(1);
+    };
     column_rays.clear();
     column_rays.extend(
         (0..width)
@@ -166,14 +175,59 @@ pub fn depth_consistency_with_identity(
         }
     }
     let sampled = height.div_ceil(stride) * width.div_ceil(stride);
-    let result = |agreeing: usize, compared: usize| {
+    (
+        Consistency::from_counts(agreeing, compared, sampled),
+        Consistency::from_counts(agreeing_still, compared_still, sampled),
+    )
+}
+
+impl Consistency {
+    /// `None` when nothing was compared.
+    fn from_counts(agreeing: usize, compared: usize, sampled: usize) -> Option<Self> {
         (compared > 0).then(|| Consistency {
             agreeing_fraction: agreeing as f64 / compared as f64,
             compared,
             sampled,
         })
-    };
-    (result(agreeing, compared), result(agreeing_still, compared_still))
+    }
+}
+
+/// The backward warp both checks share, and their size checks.
+struct Warp {
+    /// `previous_from_current` as a matrix: 9 multiply-adds per point instead of a quaternion
+    /// product.
+    rotation: nalgebra::Matrix3<f64>,
+    translation: nalgebra::Vector3<f64>,
+    width: usize,
+    height: usize,
+    /// At least 1.
+    stride: usize,
+}
+
+impl Warp {
+    /// `None` for empty images or when the previous depth or mask differs in size.
+    fn new(
+        previous_depth_m: &DepthMeters,
+        previous_mask: Option<&Mask>,
+        current_depth_m: &DepthMeters,
+        current_from_previous: &Isometry3<f64>,
+        stride: usize,
+    ) -> Option<Self> {
+        let (width, height) = (current_depth_m.width(), current_depth_m.height());
+        let mask_size_differs = previous_mask.is_some_and(|m| m.size() != current_depth_m.size());
+        if width == 0 || height == 0 || previous_depth_m.size() != current_depth_m.size() || mask_size_differs
+        {
+            return None;
+        }
+        let previous_from_current = current_from_previous.inverse();
+        Some(Self {
+            rotation: previous_from_current.rotation.to_rotation_matrix().into_inner(),
+            translation: previous_from_current.translation.vector,
+            width,
+            height,
+            stride: stride.max(1),
+        })
+    }
 }
 
 /// The pixel nearest to the projection of `point`, if it is in front of the camera and inside
