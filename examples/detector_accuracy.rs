@@ -245,13 +245,18 @@ fn list(dir: &Path, file: &str) -> Vec<(u64, PathBuf)> {
         .collect()
 }
 
-fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Option<&Path>) {
-    let truth: Vec<StampedPose> = std::fs::read_to_string(dir.join("groundtruth.txt"))
+/// The TUM-format `groundtruth.txt` of a sequence folder.
+fn ground_truth(dir: &Path) -> Vec<StampedPose> {
+    std::fs::read_to_string(dir.join("groundtruth.txt"))
         .unwrap()
         .lines()
         .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
         .map(|l| parse_tum_line(l).unwrap())
-        .collect();
+        .collect()
+}
+
+fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Option<&Path>) {
+    let truth = ground_truth(dir);
     let mut detector = OcclusionDetector::new(SIZE, intrinsics, detector_config()).unwrap();
     let mut depth = Image::filled(SIZE, 0.0f32);
     let mut previous: Option<Isometry3<f64>> = None;
@@ -346,12 +351,7 @@ fn inlier_fraction(
 /// For frames `first..=last`: the inlier fraction of the ground-truth motion, of identity, of
 /// the motion interpolated halfway between the neighbours' poses, and of scaled translations.
 fn probe(dir: &Path, intrinsics: PinholeIntrinsics, first: usize, last: usize) {
-    let truth: Vec<StampedPose> = std::fs::read_to_string(dir.join("groundtruth.txt"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| parse_tum_line(l).unwrap())
-        .collect();
+    let truth = ground_truth(dir);
     let files = list(dir, "depth.txt");
     let load = |i: usize| {
         let mut depth = Image::filled(SIZE, 0.0f32);
@@ -401,12 +401,7 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
     let mut depth = Image::filled(SIZE, 0.0f32);
     let mut fractions = Vec::new();
     let (mut not_converged, mut resets, mut rejected) = (0, 0, 0);
-    let truth: Vec<StampedPose> = std::fs::read_to_string(dir.join("groundtruth.txt"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| parse_tum_line(l).unwrap())
-        .collect();
+    let truth = ground_truth(dir);
     let (mut estimated, mut reference) = (Vec::new(), Vec::new());
     for (t, path) in list(dir, "depth.txt") {
         let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
