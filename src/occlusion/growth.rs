@@ -31,7 +31,6 @@
 
 use nalgebra::Isometry3;
 
-use super::components::NEIGHBOURS_8;
 use super::OcclusionConfig;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, MASK_SET};
@@ -114,6 +113,12 @@ impl AppearanceGrowthConfig {
     }
 }
 
+/// Mask value of a pixel the growth looked at this frame and did not grow into (depth
+/// continuous but no photometric change), and of the unset image-border pixels, which are
+/// never grown into. Exists only inside [`AppearanceGrowth::grow`]: every such pixel is reset
+/// to 0 before it returns. Masks hold 0 or [`MASK_SET`] otherwise.
+const LOOKED_AT: u8 = 1;
+
 /// Preallocated state of the growth: the previous gray image and BFS buffers.
 #[derive(Debug, Clone)]
 pub(super) struct AppearanceGrowth {
@@ -129,12 +134,13 @@ pub(super) struct AppearanceGrowth {
     previous_mask_valid: bool,
     /// `previous_mask` is all zero (it need not be cleared again).
     previous_mask_empty: bool,
-    /// `decided[u] == epoch` ⇔ u was grown or failed the photometric test this frame.
-    decided: Vec<u32>,
-    epoch: u32,
+    /// Pixels marked [`LOOKED_AT`] this frame (reset to 0 at the end).
+    looked_at: Vec<u32>,
     frontier: Vec<u32>,
     next: Vec<u32>,
-    /// Boundary flags of one row (interior columns).
+    /// Per-row scratch of the seed scan: the vertical AND of three mask rows, and the boundary
+    /// flags of one row.
+    vertical_row: Vec<u8>,
     boundary_row: Vec<u8>,
 }
 
@@ -143,6 +149,219 @@ pub(super) struct AppearanceGrowth {
 pub(super) struct GrowthCounts {
     /// Pixels added to the mask.
     pub grown: usize,
+}
+
+/// The static-world backward warp in f32: a current pixel (x, y) with depth Z is at
+/// R · (Z · ray) + t in the previous camera, projected into the previous image.
+#[derive(Debug, Clone, Copy)]
+struct BackwardWarp {
+    r: nalgebra::Matrix3<f32>,
+    t: nalgebra::Vector3<f32>,
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+}
+
+impl BackwardWarp {
+    fn new(intrinsics: &PinholeIntrinsics, previous_from_current: &Isometry3<f64>) -> Self {
+        Self {
+            r: previous_from_current
+                .rotation
+                .to_rotation_matrix()
+                .matrix()
+                .map(|v| v as f32),
+            t: previous_from_current.translation.vector.map(|v| v as f32),
+            fx: intrinsics.fx as f32,
+            fy: intrinsics.fy as f32,
+            cx: intrinsics.cx as f32,
+            cy: intrinsics.cy as f32,
+        }
+    }
+
+    /// Pixel (x, y) with depth `z_m` in the previous image; None behind the previous camera.
+    #[inline]
+    fn apply(&self, x: usize, y: usize, z_m: f32) -> Option<(f32, f32)> {
+        let (r, t) = (&self.r, &self.t);
+        let p = [
+            (x as f32 - self.cx) / self.fx * z_m,
+            (y as f32 - self.cy) / self.fy * z_m,
+            z_m,
+        ];
+        let q = [
+            r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0],
+            r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
+            r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2],
+        ];
+        (q[2] > 0.0).then(|| (self.fx * q[0] / q[2] + self.cx, self.fy * q[1] / q[2] + self.cy))
+    }
+}
+
+/// The inputs every growth test reads.
+struct Evidence<'a> {
+    growth: &'a AppearanceGrowthConfig,
+    warp: BackwardWarp,
+    width: usize,
+    height: usize,
+    depth_m: &'a [f32],
+    current: &'a [f32],
+    previous: &'a [f32],
+    /// The previous frame's final mask; None when it does not belong to the previous frame.
+    previous_mask: Option<&'a [u8]>,
+}
+
+impl Evidence<'_> {
+    /// Rule (b): pixel (x, y) changed appearance against the previous image at its warped
+    /// position (bilinear) and against every previous pixel within the search radius.
+    fn changed(&self, x: usize, y: usize) -> bool {
+        let (width, height, previous) = (self.width, self.height, self.previous);
+        let n = y * width + x;
+        let Some((u, v)) = self.warp.apply(x, y, self.depth_m[n]) else {
+            return false;
+        };
+        // Bilinear needs the 2×2 neighbourhood; a pixel warped outside has no evidence.
+        if !(u >= 0.0 && v >= 0.0 && u < (width - 1) as f32 && v < (height - 1) as f32) {
+            return false;
+        }
+        let (u0, v0) = (u as usize, v as usize);
+        let (a, b) = (u - u0 as f32, v - v0 as f32);
+        let i = v0 * width + u0;
+        let top = previous[i] + a * (previous[i + 1] - previous[i]);
+        let bottom = previous[i + width] + a * (previous[i + width + 1] - previous[i + width]);
+        let sampled = top + b * (bottom - top);
+        let threshold = self.growth.photometric_threshold;
+        let value = self.current[n];
+        if (value - sampled).abs() <= threshold {
+            return false;
+        }
+        // Every previous pixel within the radius of the nearest one must differ too.
+        let radius = self.growth.photometric_search_radius_px;
+        if radius == 0 {
+            return true;
+        }
+        let (un, vn) = ((u + 0.5) as usize, (v + 0.5) as usize);
+        let (x0, x1) = (un.saturating_sub(radius), (un + radius).min(width - 1));
+        let (y0, y1) = (vn.saturating_sub(radius), (vn + radius).min(height - 1));
+        (y0..=y1).all(|y| {
+            previous[y * width + x0..=y * width + x1]
+                .iter()
+                .all(|&p| (value - p).abs() > threshold)
+        })
+    }
+
+    /// Pixel (x, y) may seed the growth: it was an object pixel in the previous frame too (at
+    /// its static-world warp position), or any mask pixel may seed.
+    fn may_seed(&self, x: usize, y: usize) -> bool {
+        if !self.growth.persistent_seeds_only {
+            return true;
+        }
+        let Some(previous_mask) = self.previous_mask else {
+            return false;
+        };
+        let z_m = self.depth_m[y * self.width + x];
+        if z_m <= 0.0 {
+            return false;
+        }
+        let Some((u, v)) = self.warp.apply(x, y, z_m) else {
+            return false;
+        };
+        let (u, v) = (u + 0.5, v + 0.5);
+        u >= 0.0
+            && v >= 0.0
+            && (u as usize) < self.width
+            && (v as usize) < self.height
+            && previous_mask[v as usize * self.width + u as usize] != 0
+    }
+
+    /// The accumulation a pixel of depth `zn_m` grown from `zf_m` (accumulation `af_m`) gets.
+    fn grown_accumulation(&self, config: &OcclusionConfig, af_m: f32, zf_m: f32, zn_m: f32) -> f32 {
+        let floor = config.threshold(config.alpha, zn_m) * (1.0 + self.growth.accumulation_margin);
+        if self.growth.inherit_accumulation {
+            (af_m + zf_m - zn_m).max(floor)
+        } else {
+            floor
+        }
+    }
+}
+
+/// OR of all bytes (no early exit, so it vectorises): rows without mask pixels cost a few
+/// vector loads.
+fn any_set(row: &[u8]) -> bool {
+    row.iter().fold(0u8, |acc, &v| acc | v) != 0
+}
+
+/// Calls `visit(x, y)` for every interior mask pixel with an unset 8-neighbour, row by row.
+/// Mask values are 0 or 255: a pixel is on the boundary when it is set and the AND of its 3×3
+/// neighbourhood is 0. The ANDs run on whole rows (vectorised); the flags are then read 8 at a
+/// time. `vertical` and `boundary` are scratch rows of the mask's width.
+fn for_each_boundary_pixel(
+    mask: &[u8],
+    width: usize,
+    height: usize,
+    vertical: &mut [u8],
+    boundary: &mut [u8],
+    mut visit: impl FnMut(usize, usize),
+) {
+    /// Boundary flags are read as one u64 per 8 pixels.
+    const FLAGS_PER_WORD: usize = 8;
+    for y in 1..height - 1 {
+        let row = &mask[y * width..(y + 1) * width];
+        if !any_set(row) {
+            continue;
+        }
+        let up = &mask[(y - 1) * width..y * width];
+        let down = &mask[(y + 1) * width..(y + 2) * width];
+        let vertical = &mut vertical[..width];
+        for x in 0..width {
+            vertical[x] = up[x] & row[x] & down[x];
+        }
+        // boundary[i] is pixel x = i + 1.
+        let interior = &mut boundary[..width - 2];
+        let (centre, left, middle, right) = (
+            &row[1..width - 1],
+            &vertical[..width - 2],
+            &vertical[1..width - 1],
+            &vertical[2..],
+        );
+        for i in 0..width - 2 {
+            interior[i] = centre[i] & !(left[i] & middle[i] & right[i]);
+        }
+        let mut words = interior.chunks_exact(FLAGS_PER_WORD);
+        for (word_index, chunk) in words.by_ref().enumerate() {
+            let mut bytes = [0u8; FLAGS_PER_WORD];
+            bytes.copy_from_slice(chunk);
+            let mut word = u64::from_le_bytes(bytes);
+            while word != 0 {
+                let k = word.trailing_zeros() as usize / 8;
+                visit(1 + word_index * FLAGS_PER_WORD + k, y);
+                word &= !(0xFF << (8 * k));
+            }
+        }
+        let tail_start = interior.len() - words.remainder().len();
+        for (k, &b) in words.remainder().iter().enumerate() {
+            if b != 0 {
+                visit(1 + tail_start + k, y);
+            }
+        }
+    }
+}
+
+/// Sets the unset border pixels of `mask` to `from` → `to` (the growth never enters the
+/// border: with it marked, the 8 neighbours of an interior pixel need no bounds checks).
+fn relabel_unset_border(mask: &mut [u8], width: usize, height: usize, from: u8, to: u8) {
+    let mut relabel = |i: usize| {
+        if mask[i] == from {
+            mask[i] = to;
+        }
+    };
+    for x in 0..width {
+        relabel(x);
+        relabel((height - 1) * width + x);
+    }
+    for y in 1..height - 1 {
+        relabel(y * width);
+        relabel(y * width + width - 1);
+    }
 }
 
 impl AppearanceGrowth {
@@ -155,10 +374,10 @@ impl AppearanceGrowth {
             previous_mask: Image::filled(size, 0),
             previous_mask_valid: false,
             previous_mask_empty: true,
-            decided: vec![0; size.area()],
-            epoch: 0,
+            looked_at: Vec::with_capacity(size.area()),
             frontier: Vec::with_capacity(size.area()),
             next: Vec::with_capacity(size.area()),
+            vertical_row: vec![0; size.width],
             boundary_row: vec![0; size.width],
         }
     }
@@ -212,166 +431,66 @@ impl AppearanceGrowth {
         if width < 3 || height < 3 {
             return counts;
         }
-        if self.epoch == u32::MAX {
-            self.decided.fill(0);
-            self.epoch = 0;
-        }
-        self.epoch += 1;
-        let epoch = self.epoch;
-        // The static-world backward warp in f32: previous = R · (Z · ray) + t.
-        let rotation = previous_from_current.rotation.to_rotation_matrix();
-        let r = rotation.matrix().map(|v| v as f32);
-        let t = previous_from_current.translation.vector.map(|v| v as f32);
-        let (fx, fy, cx, cy) = (
-            intrinsics.fx as f32,
-            intrinsics.fy as f32,
-            intrinsics.cx as f32,
-            intrinsics.cy as f32,
-        );
-        let previous = self.previous_gray.as_slice();
-        let current = gray.as_slice();
-        let z = depth_m.as_slice();
-        // Pixel n (current depth) in the previous image, None behind the previous camera.
-        let warp = |n: usize| -> Option<(f32, f32)> {
-            let (x, y) = ((n % width) as f32, (n / width) as f32);
-            let zn = z[n];
-            let p = [(x - cx) / fx * zn, (y - cy) / fy * zn, zn];
-            let q = [
-                r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0],
-                r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
-                r[(2, 0)] * p[0] + r[(2, 1)] * p[1] + r[(2, 2)] * p[2] + t[2],
-            ];
-            (q[2] > 0.0).then(|| (fx * q[0] / q[2] + cx, fy * q[1] / q[2] + cy))
+        let evidence = Evidence {
+            growth,
+            warp: BackwardWarp::new(intrinsics, previous_from_current),
+            width,
+            height,
+            depth_m: depth_m.as_slice(),
+            current: gray.as_slice(),
+            previous: self.previous_gray.as_slice(),
+            previous_mask: self.previous_mask_valid.then_some(self.previous_mask.as_slice()),
         };
-        let changed = |n: usize| -> bool {
-            let Some((u, v)) = warp(n) else {
-                return false;
-            };
-            // Bilinear needs the 2×2 neighbourhood; a pixel warped outside has no evidence.
-            if !(u >= 0.0 && v >= 0.0 && u < (width - 1) as f32 && v < (height - 1) as f32) {
-                return false;
-            }
-            let (u0, v0) = (u as usize, v as usize);
-            let (a, b) = (u - u0 as f32, v - v0 as f32);
-            let i = v0 * width + u0;
-            let top = previous[i] + a * (previous[i + 1] - previous[i]);
-            let bottom = previous[i + width] + a * (previous[i + width + 1] - previous[i + width]);
-            let sampled = top + b * (bottom - top);
-            let threshold = growth.photometric_threshold;
-            let value = current[n];
-            if (value - sampled).abs() <= threshold {
-                return false;
-            }
-            // Every previous pixel within the radius of the nearest one must differ too.
-            let radius = growth.photometric_search_radius_px;
-            if radius == 0 {
-                return true;
-            }
-            let (un, vn) = ((u + 0.5) as usize, (v + 0.5) as usize);
-            let (x0, x1) = (un.saturating_sub(radius), (un + radius).min(width - 1));
-            let (y0, y1) = (vn.saturating_sub(radius), (vn + radius).min(height - 1));
-            (y0..=y1).all(|y| {
-                previous[y * width + x0..=y * width + x1]
-                    .iter()
-                    .all(|&p| (value - p).abs() > threshold)
-            })
-        };
-        let previous_mask = self.previous_mask.as_slice();
-        let previous_mask_valid = self.previous_mask_valid;
-        let was_object = |n: usize| -> bool {
-            let zn = z[n];
-            if zn <= 0.0 || !previous_mask_valid {
-                return false;
-            }
-            let Some((u, v)) = warp(n) else {
-                return false;
-            };
-            let (u, v) = (u + 0.5, v + 0.5);
-            u >= 0.0
-                && v >= 0.0
-                && (u as usize) < width
-                && (v as usize) < height
-                && previous_mask[v as usize * width + u as usize] != 0
-        };
-        // Seeds: mask pixels with an unset 8-neighbour (interior pixels only; rows without
-        // mask pixels are skipped at memory speed), object pixels in the previous frame too.
+        // Seeds: interior boundary pixels of the mask that may seed (rule of
+        // `persistent_seeds_only`).
         self.frontier.clear();
-        {
-            let m = mask.as_slice();
-            let boundary = &mut self.boundary_row[..width - 2];
-            for y in 1..height - 1 {
-                let row = &m[y * width..(y + 1) * width];
-                if !row.iter().any(|&v| v != 0) {
-                    continue;
+        let frontier = &mut self.frontier;
+        for_each_boundary_pixel(
+            mask.as_slice(),
+            width,
+            height,
+            &mut self.vertical_row,
+            &mut self.boundary_row,
+            |x, y| {
+                if evidence.may_seed(x, y) {
+                    frontier.push((y * width + x) as u32);
                 }
-                // Mask values are 0 or 255: a pixel is on the boundary when it is set and the
-                // AND of its 8 neighbours is 0. Whole-row slices so the loop vectorises.
-                let (up, down) = (
-                    &m[(y - 1) * width..y * width],
-                    &m[(y + 1) * width..(y + 2) * width],
-                );
-                for (x, b) in boundary.iter_mut().enumerate() {
-                    let neighbours = up[x]
-                        & up[x + 1]
-                        & up[x + 2]
-                        & row[x]
-                        & row[x + 2]
-                        & down[x]
-                        & down[x + 1]
-                        & down[x + 2];
-                    *b = row[x + 1] & !neighbours;
-                }
-                // Skip runs without boundary pixels 8 at a time.
-                for (chunk_index, chunk) in boundary.chunks(8).enumerate() {
-                    if chunk.iter().all(|&b| b == 0) {
-                        continue;
-                    }
-                    for (k, &b) in chunk.iter().enumerate() {
-                        let i = y * width + 1 + chunk_index * 8 + k;
-                        if b != 0 && (!growth.persistent_seeds_only || was_object(i)) {
-                            self.frontier.push(i as u32);
-                        }
-                    }
-                }
-            }
-        }
+            },
+        );
         let m = mask.as_mut_slice();
         let a = accumulation_m.as_mut_slice();
+        let z = evidence.depth_m;
+        relabel_unset_border(m, width, height, 0, LOOKED_AT);
+        self.looked_at.clear();
+        let w = width as isize;
+        let neighbour_offsets = [-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1];
         for _ in 0..growth.max_rings {
             self.next.clear();
             for &f in &self.frontier {
                 let f = f as usize;
-                let (fx_i, fy_i) = (f % width, f / width);
                 let zf = z[f];
                 if zf <= 0.0 {
                     continue;
                 }
                 let tolerance = growth.depth_tolerance * zf;
-                for &(dx, dy) in &NEIGHBOURS_8 {
-                    let (nx, ny) = (fx_i as isize + dx, fy_i as isize + dy);
-                    // Interior pixels only: the frontier's seeds are interior too.
-                    if nx < 1 || ny < 1 || nx >= width as isize - 1 || ny >= height as isize - 1 {
-                        continue;
-                    }
-                    let n = ny as usize * width + nx as usize;
-                    if m[n] != 0 || self.decided[n] == epoch {
+                // f is interior (seeds are, and the border is marked), so are its neighbours.
+                for offset in neighbour_offsets {
+                    let n = f.wrapping_add_signed(offset);
+                    if m[n] != 0 {
                         continue;
                     }
                     let zn = z[n];
                     if zn <= 0.0 || (zn - zf).abs() > tolerance {
                         continue;
                     }
-                    self.decided[n] = epoch;
-                    if !changed(n) {
+                    let y = n / width;
+                    if !evidence.changed(n - y * width, y) {
+                        m[n] = LOOKED_AT;
+                        self.looked_at.push(n as u32);
                         continue;
                     }
                     m[n] = MASK_SET;
-                    let floor = config.threshold(config.alpha, zn) * (1.0 + growth.accumulation_margin);
-                    a[n] = if growth.inherit_accumulation {
-                        (a[f] + zf - zn).max(floor)
-                    } else {
-                        floor
-                    };
+                    a[n] = evidence.grown_accumulation(config, a[f], zf, zn);
                     self.next.push(n as u32);
                 }
             }
@@ -381,13 +500,100 @@ impl AppearanceGrowth {
             }
             std::mem::swap(&mut self.frontier, &mut self.next);
         }
+        for &n in &self.looked_at {
+            m[n as usize] = 0;
+        }
+        relabel_unset_border(m, width, height, LOOKED_AT, 0);
         counts
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::components::NEIGHBOURS_8;
     use super::*;
+
+    /// The growth written plainly (the reference of [`AppearanceGrowth::grow`]): seeds by
+    /// testing each mask pixel's 8 neighbours, breadth-first rings with bounds checks and a
+    /// separate "decided" image; same rules, same order.
+    #[allow(clippy::too_many_arguments)]
+    fn grow_reference(
+        state: &AppearanceGrowth,
+        growth: &AppearanceGrowthConfig,
+        config: &OcclusionConfig,
+        intrinsics: &PinholeIntrinsics,
+        previous_from_current: &Isometry3<f64>,
+        depth_m: &DepthMeters,
+        gray: &GrayF32,
+        mask: &mut Mask,
+        accumulation_m: &mut DepthMeters,
+    ) -> usize {
+        let (width, height) = (state.width, state.height);
+        if !state.previous_valid || growth.max_rings == 0 {
+            return 0;
+        }
+        let evidence = Evidence {
+            growth,
+            warp: BackwardWarp::new(intrinsics, previous_from_current),
+            width,
+            height,
+            depth_m: depth_m.as_slice(),
+            current: gray.as_slice(),
+            previous: state.previous_gray.as_slice(),
+            previous_mask: state
+                .previous_mask_valid
+                .then_some(state.previous_mask.as_slice()),
+        };
+        let interior =
+            |x: isize, y: isize| x >= 1 && y >= 1 && x < width as isize - 1 && y < height as isize - 1;
+        let set = |mask: &Mask, x: isize, y: isize| mask.get(x as usize, y as usize) != 0;
+        let mut frontier = Vec::new();
+        for y in 1..height - 1 {
+            for x in 1..width - 1 {
+                let (xi, yi) = (x as isize, y as isize);
+                let on_boundary =
+                    set(mask, xi, yi) && NEIGHBOURS_8.iter().any(|&(dx, dy)| !set(mask, xi + dx, yi + dy));
+                if on_boundary && evidence.may_seed(x, y) {
+                    frontier.push((x, y));
+                }
+            }
+        }
+        let mut decided = vec![false; width * height];
+        let mut grown = 0;
+        for _ in 0..growth.max_rings {
+            let mut next = Vec::new();
+            for &(fx, fy) in &frontier {
+                let zf = depth_m.get(fx, fy);
+                if zf <= 0.0 {
+                    continue;
+                }
+                for &(dx, dy) in &NEIGHBOURS_8 {
+                    let (nx, ny) = (fx as isize + dx, fy as isize + dy);
+                    if !interior(nx, ny) || set(mask, nx, ny) || decided[ny as usize * width + nx as usize] {
+                        continue;
+                    }
+                    let (nx, ny) = (nx as usize, ny as usize);
+                    let zn = depth_m.get(nx, ny);
+                    if zn <= 0.0 || (zn - zf).abs() > growth.depth_tolerance * zf {
+                        continue;
+                    }
+                    decided[ny * width + nx] = true;
+                    if evidence.changed(nx, ny) {
+                        mask.set(nx, ny, MASK_SET);
+                        let af = accumulation_m.get(fx, fy);
+                        accumulation_m.set(nx, ny, evidence.grown_accumulation(config, af, zf, zn));
+                        next.push((nx, ny));
+                    }
+                }
+            }
+            grown += next.len();
+            if next.is_empty() {
+                break;
+            }
+            frontier = next;
+        }
+        grown
+    }
 
     const SIZE: ImageSize = ImageSize::new(160, 120);
     /// The box: [40, 100) × [30, 90) at 2 m in front of a wall at 3 m.
@@ -471,6 +677,174 @@ mod tests {
             max_rings: 1000,
             ..AppearanceGrowthConfig::default()
         }
+    }
+
+    /// xorshift64*: deterministic pseudo-random numbers for the agreement test.
+    struct Random(u64);
+
+    impl Random {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+
+        /// Uniform in [0, 1).
+        fn unit(&mut self) -> f32 {
+            (self.next() >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    /// A random scene: depth steps between a few planes (with holes), random textures, masks
+    /// of random rectangles with speckle holes touching the image border, a previous mask
+    /// that overlaps them, and a small camera motion.
+    struct Scene {
+        size: ImageSize,
+        depth: DepthMeters,
+        previous_gray: GrayF32,
+        gray: GrayF32,
+        previous_mask: Mask,
+        mask: Mask,
+        accumulation: DepthMeters,
+        motion: Isometry3<f64>,
+    }
+
+    fn random_scene(seed: u64) -> Scene {
+        let mut random = Random(seed | 1);
+        // Odd sizes: the seed scan's 8-pixel words end in a partial word.
+        let size = ImageSize::new(
+            61 + (random.next() % 40) as usize,
+            37 + (random.next() % 30) as usize,
+        );
+        let planes: Vec<f32> = (0..3).map(|_| 1.0 + 3.0 * random.unit()).collect();
+        let split = (random.next() % size.width as u64) as usize;
+        let depth = Image::from_fn(size, |x, y| {
+            let plane = usize::from(x >= split) + usize::from(y % 17 < 5);
+            let slope = 0.002 * x as f32;
+            if (x * 7 + y * 13) % 29 == 0 {
+                0.0
+            } else {
+                planes[plane] + slope
+            }
+        });
+        let previous_gray = Image::from_fn(size, |_, _| random.unit());
+        // Half the pixels keep their previous value, the others change (texture moved).
+        let gray = Image::from_fn(size, |x, y| {
+            if random.next().is_multiple_of(2) {
+                previous_gray.get(x, y)
+            } else {
+                random.unit()
+            }
+        });
+        let mut mask: Mask = Image::filled(size, 0);
+        for _ in 0..4 {
+            let (x0, y0) = (
+                random.next() as usize % size.width,
+                random.next() as usize % size.height,
+            );
+            let (w, h) = (1 + random.next() as usize % 25, 1 + random.next() as usize % 20);
+            for y in y0..(y0 + h).min(size.height) {
+                for x in x0..(x0 + w).min(size.width) {
+                    if !random.next().is_multiple_of(11) {
+                        mask.set(x, y, MASK_SET);
+                    }
+                }
+            }
+        }
+        let previous_mask = Image::from_fn(size, |x, y| {
+            if x > 0 && mask.get(x - 1, y) != 0 || random.next().is_multiple_of(5) {
+                MASK_SET
+            } else {
+                0
+            }
+        });
+        let accumulation = Image::from_fn(size, |x, y| {
+            if mask.get(x, y) != 0 {
+                0.2 + random.unit()
+            } else {
+                0.0
+            }
+        });
+        let motion = Isometry3::new(
+            nalgebra::Vector3::new(0.01 * f64::from(random.unit()), -0.005, 0.02),
+            nalgebra::Vector3::new(0.0, 0.01 * f64::from(random.unit()), 0.003),
+        );
+        Scene {
+            size,
+            depth,
+            previous_gray,
+            gray,
+            previous_mask,
+            mask,
+            accumulation,
+            motion,
+        }
+    }
+
+    #[test]
+    fn growth_matches_the_plain_reference_on_random_scenes() {
+        let config = OcclusionConfig::default();
+        let growths = [
+            AppearanceGrowthConfig::default(),
+            unbounded(),
+            AppearanceGrowthConfig {
+                max_rings: 2,
+                photometric_search_radius_px: 0,
+                ..AppearanceGrowthConfig::default()
+            },
+            AppearanceGrowthConfig {
+                persistent_seeds_only: false,
+                inherit_accumulation: false,
+                depth_tolerance: 0.5,
+                ..unbounded()
+            },
+        ];
+        let mut total_grown = 0;
+        for seed in 0..40u64 {
+            let scene = random_scene(0x9E37_79B9_7F4A_7C15 ^ seed);
+            let intrinsics = PinholeIntrinsics::new(60.0, 60.0, scene.size.width as f64 / 2.0, 25.0);
+            for growth in &growths {
+                let mut state = AppearanceGrowth::new(scene.size);
+                let previous_pixels = scene.previous_mask.as_slice().iter().filter(|&&m| m != 0).count();
+                state.remember(Some(&scene.previous_gray), &scene.previous_mask, previous_pixels);
+                let mask_pixels = scene.mask.as_slice().iter().filter(|&&m| m != 0).count();
+                let (mut mask, mut accumulation) = (scene.mask.clone(), scene.accumulation.clone());
+                let counts = state.grow(
+                    growth,
+                    &config,
+                    &intrinsics,
+                    &scene.motion,
+                    &scene.depth,
+                    &scene.gray,
+                    &mut mask,
+                    &mut accumulation,
+                    mask_pixels,
+                );
+                let (mut expected_mask, mut expected_accumulation) =
+                    (scene.mask.clone(), scene.accumulation.clone());
+                let expected_grown = grow_reference(
+                    &state,
+                    growth,
+                    &config,
+                    &intrinsics,
+                    &scene.motion,
+                    &scene.depth,
+                    &scene.gray,
+                    &mut expected_mask,
+                    &mut expected_accumulation,
+                );
+                assert_eq!(counts.grown, expected_grown, "seed {seed}, {growth:?}");
+                assert!(mask == expected_mask, "seed {seed}, {growth:?}: masks differ");
+                assert!(
+                    accumulation == expected_accumulation,
+                    "seed {seed}, {growth:?}: accumulations differ"
+                );
+                total_grown += counts.grown;
+            }
+        }
+        // The scenes exercise the growth (not a comparison of two empty results).
+        assert!(total_grown > 2000, "{total_grown}");
     }
 
     #[test]
