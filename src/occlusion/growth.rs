@@ -30,6 +30,7 @@
 //! detected objects (a static view) the stage does nothing but keep the gray image.
 
 use nalgebra::Isometry3;
+use rayon::prelude::*;
 
 use super::OcclusionConfig;
 use crate::geometry::PinholeIntrinsics;
@@ -134,12 +135,30 @@ pub(super) struct AppearanceGrowth {
     previous_mask_valid: bool,
     /// `previous_mask` is all zero (it need not be cleared again).
     previous_mask_empty: bool,
+    /// This frame's gray image, copied while the growth runs; [`AppearanceGrowth::remember`]
+    /// swaps it in instead of copying.
+    staged_gray: GrayF32,
+    /// `staged_gray` holds the gray image `grow` was given this frame.
+    staged: bool,
     /// Pixels marked [`LOOKED_AT`] this frame (reset to 0 at the end).
     looked_at: Vec<u32>,
     frontier: Vec<u32>,
     next: Vec<u32>,
-    /// Per-row scratch of the seed scan: the vertical AND of three mask rows, and the boundary
-    /// flags of one row.
+    /// The seed scan's row bands (one parallel task each).
+    bands: Vec<SeedBand>,
+}
+
+/// Rows of the seed scan per parallel task: a band's seeds are found independently and the
+/// bands' lists concatenated in row order, so the frontier is the sequential scan's.
+const SEED_ROWS_PER_TASK: usize = 64;
+
+/// One band of the seed scan: its seeds and scratch rows.
+#[derive(Debug, Clone)]
+struct SeedBand {
+    /// First and one-past-last row (interior rows only).
+    rows: std::ops::Range<usize>,
+    seeds: Vec<u32>,
+    /// The vertical AND of three mask rows, and the boundary flags of one row.
     vertical_row: Vec<u8>,
     boundary_row: Vec<u8>,
 }
@@ -290,21 +309,22 @@ fn any_set(row: &[u8]) -> bool {
     row.iter().fold(0u8, |acc, &v| acc | v) != 0
 }
 
-/// Calls `visit(x, y)` for every interior mask pixel with an unset 8-neighbour, row by row.
+/// Calls `visit(x, y)` for every interior mask pixel with an unset 8-neighbour in `rows`, row
+/// by row.
 /// Mask values are 0 or 255: a pixel is on the boundary when it is set and the AND of its 3×3
 /// neighbourhood is 0. The ANDs run on whole rows (vectorised); the flags are then read 8 at a
 /// time. `vertical` and `boundary` are scratch rows of the mask's width.
 fn for_each_boundary_pixel(
     mask: &[u8],
     width: usize,
-    height: usize,
+    rows: std::ops::Range<usize>,
     vertical: &mut [u8],
     boundary: &mut [u8],
     mut visit: impl FnMut(usize, usize),
 ) {
     /// Boundary flags are read as one u64 per 8 pixels.
     const FLAGS_PER_WORD: usize = 8;
-    for y in 1..height - 1 {
+    for y in rows {
         let row = &mask[y * width..(y + 1) * width];
         if !any_set(row) {
             continue;
@@ -374,11 +394,20 @@ impl AppearanceGrowth {
             previous_mask: Image::filled(size, 0),
             previous_mask_valid: false,
             previous_mask_empty: true,
+            staged_gray: Image::filled(size, 0.0),
+            staged: false,
             looked_at: Vec::with_capacity(size.area()),
             frontier: Vec::with_capacity(size.area()),
             next: Vec::with_capacity(size.area()),
-            vertical_row: vec![0; size.width],
-            boundary_row: vec![0; size.width],
+            bands: (1..size.height.saturating_sub(1))
+                .step_by(SEED_ROWS_PER_TASK)
+                .map(|start| SeedBand {
+                    rows: start..(start + SEED_ROWS_PER_TASK).min(size.height - 1),
+                    seeds: Vec::with_capacity(SEED_ROWS_PER_TASK * size.width),
+                    vertical_row: vec![0; size.width],
+                    boundary_row: vec![0; size.width],
+                })
+                .collect(),
         }
     }
 
@@ -386,6 +415,7 @@ impl AppearanceGrowth {
     pub(super) fn invalidate(&mut self) {
         self.previous_valid = false;
         self.previous_mask_valid = false;
+        self.staged = false;
     }
 
     /// Keeps `gray` and the final `mask` (with `mask_pixels` set pixels) for the next frame
@@ -393,7 +423,11 @@ impl AppearanceGrowth {
     pub(super) fn remember(&mut self, gray: Option<&GrayF32>, mask: &Mask, mask_pixels: usize) {
         match gray {
             Some(g) if g.size() == self.previous_gray.size() => {
-                self.previous_gray.as_mut_slice().copy_from_slice(g.as_slice());
+                if std::mem::take(&mut self.staged) {
+                    std::mem::swap(&mut self.previous_gray, &mut self.staged_gray);
+                } else {
+                    self.previous_gray.as_mut_slice().copy_from_slice(g.as_slice());
+                }
                 self.previous_valid = true;
                 // An empty mask is copied only once (static views cost nothing here).
                 if mask_pixels > 0 || !self.previous_mask_empty {
@@ -409,7 +443,9 @@ impl AppearanceGrowth {
     /// Grows the objects of `mask` (final for this frame) into neighbours with continuous depth
     /// and changed appearance, writing grown pixels into `mask` and `accumulation_m`.
     /// `depth_m` is the current measured depth, `gray` the current image, `mask_pixels` the
-    /// number of set pixels of `mask` (nothing happens when 0). Does not remember `gray`.
+    /// number of set pixels of `mask` (nothing happens when 0). Copies `gray` aside while it
+    /// works, for [`AppearanceGrowth::remember`] to keep without a copy: call `remember` with
+    /// the same `gray` next.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn grow(
         &mut self,
@@ -441,32 +477,78 @@ impl AppearanceGrowth {
             previous: self.previous_gray.as_slice(),
             previous_mask: self.previous_mask_valid.then_some(self.previous_mask.as_slice()),
         };
-        // Seeds: interior boundary pixels of the mask that may seed (rule of
-        // `persistent_seeds_only`).
-        self.frontier.clear();
-        let frontier = &mut self.frontier;
-        for_each_boundary_pixel(
-            mask.as_slice(),
-            width,
-            height,
-            &mut self.vertical_row,
-            &mut self.boundary_row,
-            |x, y| {
-                if evidence.may_seed(x, y) {
-                    frontier.push((y * width + x) as u32);
-                }
+        let state = GrowthBuffers {
+            looked_at: &mut self.looked_at,
+            frontier: &mut self.frontier,
+            next: &mut self.next,
+            bands: &mut self.bands,
+        };
+        // The copy of this frame's gray image (for the next frame) overlaps the growth: both
+        // are memory-bound, and the growth is mostly sequential.
+        let staged_gray = self.staged_gray.as_mut_slice();
+        let ((), grown) = rayon::join(
+            || staged_gray.copy_from_slice(gray.as_slice()),
+            || {
+                state.grow(
+                    &evidence,
+                    config,
+                    mask.as_mut_slice(),
+                    accumulation_m.as_mut_slice(),
+                )
             },
         );
-        let m = mask.as_mut_slice();
-        let a = accumulation_m.as_mut_slice();
+        self.staged = true;
+        counts.grown = grown;
+        counts
+    }
+}
+
+/// The growth's buffers, borrowed apart from the images it reads.
+struct GrowthBuffers<'a> {
+    looked_at: &'a mut Vec<u32>,
+    frontier: &'a mut Vec<u32>,
+    next: &'a mut Vec<u32>,
+    bands: &'a mut [SeedBand],
+}
+
+impl GrowthBuffers<'_> {
+    /// Seeds, then rings; returns the pixels grown.
+    fn grow(self, evidence: &Evidence, config: &OcclusionConfig, m: &mut [u8], a: &mut [f32]) -> usize {
+        let (width, height, growth) = (evidence.width, evidence.height, evidence.growth);
+        // Seeds: interior boundary pixels of the mask that may seed (rule of
+        // `persistent_seeds_only`), found band by band in parallel.
+        {
+            let mask: &[u8] = m;
+            self.bands.par_iter_mut().for_each(|band| {
+                band.seeds.clear();
+                let seeds = &mut band.seeds;
+                for_each_boundary_pixel(
+                    mask,
+                    width,
+                    band.rows.clone(),
+                    &mut band.vertical_row,
+                    &mut band.boundary_row,
+                    |x, y| {
+                        if evidence.may_seed(x, y) {
+                            seeds.push((y * width + x) as u32);
+                        }
+                    },
+                );
+            });
+        }
+        self.frontier.clear();
+        for band in self.bands.iter() {
+            self.frontier.extend_from_slice(&band.seeds);
+        }
         let z = evidence.depth_m;
         relabel_unset_border(m, width, height, 0, LOOKED_AT);
         self.looked_at.clear();
         let w = width as isize;
         let neighbour_offsets = [-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1];
+        let mut grown = 0;
         for _ in 0..growth.max_rings {
             self.next.clear();
-            for &f in &self.frontier {
+            for &f in self.frontier.iter() {
                 let f = f as usize;
                 let zf = z[f];
                 if zf <= 0.0 {
@@ -494,17 +576,17 @@ impl AppearanceGrowth {
                     self.next.push(n as u32);
                 }
             }
-            counts.grown += self.next.len();
+            grown += self.next.len();
             if self.next.is_empty() {
                 break;
             }
-            std::mem::swap(&mut self.frontier, &mut self.next);
+            std::mem::swap(self.frontier, self.next);
         }
-        for &n in &self.looked_at {
+        for &n in self.looked_at.iter() {
             m[n as usize] = 0;
         }
         relabel_unset_border(m, width, height, LOOKED_AT, 0);
-        counts
+        grown
     }
 }
 
@@ -845,6 +927,37 @@ mod tests {
         }
         // The scenes exercise the growth (not a comparison of two empty results).
         assert!(total_grown > 2000, "{total_grown}");
+    }
+
+    #[test]
+    fn remember_keeps_the_gray_image_whether_or_not_the_growth_staged_it() {
+        let (previous, current) = moved_pair(true, false);
+        let seeds = Image::from_fn(SIZE, |x, y| if in_box(x, y) && x >= 94 { MASK_SET } else { 0 });
+        let mut state = AppearanceGrowth::new(SIZE);
+        state.remember(Some(&previous), &seeds, 360);
+        assert!(state.previous_gray == previous, "copied without a growth");
+        let (mut mask, mut accumulation) = (seeds.clone(), Image::filled(SIZE, 1.0f32));
+        let counts = state.grow(
+            &unbounded(),
+            &OcclusionConfig::default(),
+            &intrinsics(),
+            &Isometry3::identity(),
+            &depth(),
+            &current,
+            &mut mask,
+            &mut accumulation,
+            360,
+        );
+        assert!(counts.grown > 0);
+        state.remember(Some(&current), &mask, 360 + counts.grown);
+        assert!(state.previous_gray == current, "swapped in after a growth");
+        assert!(state.previous_mask == mask);
+        // The next frame without a growth (no objects) copies again.
+        state.remember(Some(&previous), &Image::filled(SIZE, 0), 0);
+        assert!(
+            state.previous_gray == previous,
+            "copied after the staged image was used"
+        );
     }
 
     #[test]
