@@ -451,21 +451,10 @@ impl OcclusionDetector {
             });
         }
         self.stats = OcclusionStats::default();
-        if self.frames > 0 && self.motion_rejected(depth_m, current_from_previous) {
-            self.frames = 0;
-        }
         if self.frames == 0 {
-            self.compensated_m.copy_from(depth_m)?;
-            self.accumulation_m.fill(0.0);
-            self.predicted.fill(0);
-            self.mask.fill(0);
-            self.delta_z_m.fill(0.0);
-            self.newly_discovered.fill(0);
-            self.frames = 1;
-            self.growth.remember(gray, &self.mask, 0);
+            self.restart(depth_m, gray);
             return Ok(&self.mask);
         }
-        self.frames += 1;
         // One entry into the thread pool per frame: the parallel passes inside then start from
         // a worker thread instead of each queueing a job from outside the pool (the pool's
         // injector queue allocates a block every 63 outside jobs).
@@ -473,41 +462,19 @@ impl OcclusionDetector {
         Ok(&self.mask)
     }
 
-    /// The motion check (`OcclusionConfig::motion_check_margin`): true when the motion explains
-    /// the new depth worse than no motion by more than the margin. Pixels of the previous mask
-    /// are not compared (they moved).
-    fn motion_rejected(&mut self, depth_m: &DepthMeters, current_from_previous: &Isometry3<f64>) -> bool {
-        let Some(margin) = self.config.motion_check_margin else {
-            return false;
-        };
-        let (moved, still) = consistency::depth_consistency_with_identity(
-            &self.intrinsics,
-            &self.compensated_m,
-            Some(&self.mask),
-            depth_m,
-            current_from_previous,
-            MOTION_CHECK_STRIDE,
-            &mut self.motion_check_rays.0,
-            &mut self.motion_check_rays.1,
-        );
-        let (Some(moved), Some(still)) = (moved, still) else {
-            return false;
-        };
-        let (moved, still, compared, sampled) = (
-            moved.agreeing_fraction,
-            still.agreeing_fraction,
-            moved.compared.min(still.compared),
-            moved.sampled,
-        );
-        self.stats.motion_consistency = moved as f32;
-        self.stats.identity_consistency = still as f32;
-        // Too little static background left to judge the motion by (an object filling the
-        // view): trust it rather than throw the objects away.
-        if (compared as f64) < MOTION_CHECK_MIN_COMPARED_FRACTION * sampled as f64 {
-            return false;
-        }
-        self.stats.motion_rejected = (moved as f32) < still as f32 - margin;
-        self.stats.motion_rejected
+    /// Starts the sequence over at this frame: its depth becomes the compensated depth, A, P
+    /// and the mask are cleared.
+    fn restart(&mut self, depth_m: &DepthMeters, gray: Option<&GrayF32>) {
+        self.compensated_m
+            .as_mut_slice()
+            .copy_from_slice(depth_m.as_slice());
+        self.accumulation_m.fill(0.0);
+        self.predicted.fill(0);
+        self.mask.fill(0);
+        self.delta_z_m.fill(0.0);
+        self.newly_discovered.fill(0);
+        self.frames = 1;
+        self.growth.remember(gray, &self.mask, 0);
     }
 
     /// Steps 2–13 for every frame after the first.
@@ -537,11 +504,38 @@ impl OcclusionDetector {
             newly_discovered: &mut self.newly_discovered,
             object_labels: self.components.labels_mut(),
         };
-        let counts = if self.reference_transport {
-            transport::transport_scalar(&inputs, outputs)
-        } else {
-            transport::transport(&inputs, &mut self.transport_scratch, outputs)
-        };
+        let (reference_transport, transport_scratch) =
+            (self.reference_transport, &mut self.transport_scratch);
+        // The motion check runs beside the transport, which only writes next-frame buffers: a
+        // rejected motion discards them and restarts the sequence (the check is a sequential
+        // pass over scattered samples, the transport uses every core).
+        let (verdict, counts) = rayon::join(
+            || {
+                motion_verdict(
+                    &self.config,
+                    &self.intrinsics,
+                    (&self.compensated_m, &self.mask),
+                    depth_m,
+                    current_from_previous,
+                    &mut self.motion_check_rays,
+                )
+            },
+            || {
+                if reference_transport {
+                    transport::transport_scalar(&inputs, outputs)
+                } else {
+                    transport::transport(&inputs, transport_scratch, outputs)
+                }
+            },
+        );
+        self.stats.motion_consistency = verdict.motion_consistency;
+        self.stats.identity_consistency = verdict.identity_consistency;
+        self.stats.motion_rejected = verdict.rejected;
+        if verdict.rejected {
+            self.restart(depth_m, gray);
+            return;
+        }
+        self.frames += 1;
         self.stats.warped_pixels = counts.warped;
         self.stats.newly_discovered_pixels = counts.newly_discovered;
         std::mem::swap(&mut self.compensated_m, &mut self.compensated_next_m);
@@ -614,6 +608,61 @@ impl OcclusionDetector {
         }
         self.growth.remember(gray, &self.mask, self.stats.mask_pixels);
     }
+}
+
+/// The motion check's verdict ([`OcclusionConfig::motion_check_margin`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct MotionVerdict {
+    /// Depth agreement under the motion and under no motion (0 when not judged).
+    motion_consistency: f32,
+    identity_consistency: f32,
+    /// The motion explains the new depth worse than no motion by more than the margin.
+    rejected: bool,
+}
+
+/// The motion check (`OcclusionConfig::motion_check_margin`): rejected when the motion explains
+/// the new depth worse than no motion by more than the margin. Pixels of the previous mask are
+/// not compared (they moved). `rays` is the check's ray-table scratch.
+fn motion_verdict(
+    config: &OcclusionConfig,
+    intrinsics: &PinholeIntrinsics,
+    (compensated_previous_m, previous_mask): (&DepthMeters, &Mask),
+    depth_m: &DepthMeters,
+    current_from_previous: &Isometry3<f64>,
+    rays: &mut (Vec<f64>, Vec<f64>),
+) -> MotionVerdict {
+    let mut verdict = MotionVerdict::default();
+    let Some(margin) = config.motion_check_margin else {
+        return verdict;
+    };
+    let (moved, still) = consistency::depth_consistency_with_identity(
+        intrinsics,
+        compensated_previous_m,
+        Some(previous_mask),
+        depth_m,
+        current_from_previous,
+        MOTION_CHECK_STRIDE,
+        &mut rays.0,
+        &mut rays.1,
+    );
+    let (Some(moved), Some(still)) = (moved, still) else {
+        return verdict;
+    };
+    let (moved, still, compared, sampled) = (
+        moved.agreeing_fraction,
+        still.agreeing_fraction,
+        moved.compared.min(still.compared),
+        moved.sampled,
+    );
+    verdict.motion_consistency = moved as f32;
+    verdict.identity_consistency = still as f32;
+    // Too little static background left to judge the motion by (an object filling the view):
+    // trust it rather than throw the objects away.
+    if (compared as f64) < MOTION_CHECK_MIN_COMPARED_FRACTION * sampled as f64 {
+        return verdict;
+    }
+    verdict.rejected = (moved as f32) < still as f32 - margin;
+    verdict
 }
 
 /// Counts of the object-mask pass.
