@@ -129,12 +129,11 @@ pub(super) struct AppearanceGrowth {
     previous_gray: GrayF32,
     /// `previous_gray` belongs to the detector's previous frame.
     previous_valid: bool,
-    /// Final mask of the detector's previous frame (after growth).
+    /// Final mask of the detector's previous frame (after growth), handed over by
+    /// [`AppearanceGrowth::keep_mask`].
     previous_mask: Mask,
     /// `previous_mask` belongs to the previous frame (false after a reset or without gray).
     previous_mask_valid: bool,
-    /// `previous_mask` is all zero (it need not be cleared again).
-    previous_mask_empty: bool,
     /// This frame's gray image, copied while the growth runs; [`AppearanceGrowth::remember`]
     /// swaps it in instead of copying.
     staged_gray: GrayF32,
@@ -393,7 +392,6 @@ impl AppearanceGrowth {
             previous_valid: false,
             previous_mask: Image::filled(size, 0),
             previous_mask_valid: false,
-            previous_mask_empty: true,
             staged_gray: Image::filled(size, 0.0),
             staged: false,
             looked_at: Vec::with_capacity(size.area()),
@@ -418,9 +416,10 @@ impl AppearanceGrowth {
         self.staged = false;
     }
 
-    /// Keeps `gray` and the final `mask` (with `mask_pixels` set pixels) for the next frame
-    /// (gray None: there is nothing to compare with).
-    pub(super) fn remember(&mut self, gray: Option<&GrayF32>, mask: &Mask, mask_pixels: usize) {
+    /// Keeps `gray` for the next frame (None: there is nothing to compare with). The frame's
+    /// final mask is handed over by [`AppearanceGrowth::keep_mask`] before the next frame
+    /// overwrites it.
+    pub(super) fn remember(&mut self, gray: Option<&GrayF32>) {
         match gray {
             Some(g) if g.size() == self.previous_gray.size() => {
                 if std::mem::take(&mut self.staged) {
@@ -429,15 +428,17 @@ impl AppearanceGrowth {
                     self.previous_gray.as_mut_slice().copy_from_slice(g.as_slice());
                 }
                 self.previous_valid = true;
-                // An empty mask is copied only once (static views cost nothing here).
-                if mask_pixels > 0 || !self.previous_mask_empty {
-                    self.previous_mask.as_mut_slice().copy_from_slice(mask.as_slice());
-                    self.previous_mask_empty = mask_pixels == 0;
-                }
                 self.previous_mask_valid = true;
             }
             _ => self.invalidate(),
         }
+    }
+
+    /// Takes `mask`, the final mask of the frame last remembered, as the previous mask: the
+    /// buffers are swapped (no copy), so `mask` then holds stale values and must be
+    /// overwritten whole (the detector calls this right before its object-mask pass).
+    pub(super) fn keep_mask(&mut self, mask: &mut Mask) {
+        std::mem::swap(&mut self.previous_mask, mask);
     }
 
     /// Grows the objects of `mask` (final for this frame) into neighbours with continuous depth
@@ -595,6 +596,12 @@ mod tests {
     use super::super::components::NEIGHBOURS_8;
     use super::*;
 
+    /// The detector's end of frame: keeps `gray` and hands `mask` over as the previous mask.
+    fn remember_frame(state: &mut AppearanceGrowth, gray: &GrayF32, mask: &Mask) {
+        state.remember(Some(gray));
+        state.keep_mask(&mut mask.clone());
+    }
+
     /// The growth written plainly (the reference of [`AppearanceGrowth::grow`]): seeds by
     /// testing each mask pixel's 8 neighbours, breadth-first rings with bounds checks and a
     /// separate "decided" image; same rules, same order.
@@ -737,7 +744,7 @@ mod tests {
         let mask_pixels = SEED_X.len() * BOX_Y.len();
         let mut state = AppearanceGrowth::new(SIZE);
         // The strip was already detected in the previous frame (the growth's seeds).
-        state.remember(Some(previous), &mask, mask_pixels);
+        remember_frame(&mut state, previous, &mask);
         let counts = state.grow(
             &growth,
             &config,
@@ -888,8 +895,7 @@ mod tests {
             let intrinsics = PinholeIntrinsics::new(60.0, 60.0, scene.size.width as f64 / 2.0, 25.0);
             for growth in &growths {
                 let mut state = AppearanceGrowth::new(scene.size);
-                let previous_pixels = scene.previous_mask.as_slice().iter().filter(|&&m| m != 0).count();
-                state.remember(Some(&scene.previous_gray), &scene.previous_mask, previous_pixels);
+                remember_frame(&mut state, &scene.previous_gray, &scene.previous_mask);
                 let mask_pixels = scene.mask.as_slice().iter().filter(|&&m| m != 0).count();
                 let (mut mask, mut accumulation) = (scene.mask.clone(), scene.accumulation.clone());
                 let counts = state.grow(
@@ -934,7 +940,7 @@ mod tests {
         let (previous, current) = moved_pair(true, false);
         let seeds = Image::from_fn(SIZE, |x, y| if in_box(x, y) && x >= 94 { MASK_SET } else { 0 });
         let mut state = AppearanceGrowth::new(SIZE);
-        state.remember(Some(&previous), &seeds, 360);
+        remember_frame(&mut state, &previous, &seeds);
         assert!(state.previous_gray == previous, "copied without a growth");
         let (mut mask, mut accumulation) = (seeds.clone(), Image::filled(SIZE, 1.0f32));
         let counts = state.grow(
@@ -949,11 +955,11 @@ mod tests {
             360,
         );
         assert!(counts.grown > 0);
-        state.remember(Some(&current), &mask, 360 + counts.grown);
+        remember_frame(&mut state, &current, &mask);
         assert!(state.previous_gray == current, "swapped in after a growth");
         assert!(state.previous_mask == mask);
         // The next frame without a growth (no objects) copies again.
-        state.remember(Some(&previous), &Image::filled(SIZE, 0), 0);
+        remember_frame(&mut state, &previous, &Image::filled(SIZE, 0));
         assert!(
             state.previous_gray == previous,
             "copied after the staged image was used"
@@ -1004,7 +1010,7 @@ mod tests {
             let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { 1.0 } else { 0.0 });
             let mut state = AppearanceGrowth::new(SIZE);
             // Nothing was detected in the previous frame.
-            state.remember(Some(&previous), &Image::filled(SIZE, 0), 0);
+            remember_frame(&mut state, &previous, &Image::filled(SIZE, 0));
             state
                 .grow(
                     &growth,
@@ -1080,7 +1086,7 @@ mod tests {
             let mut mask = Image::from_fn(SIZE, |x, y| if seed(x, y) { MASK_SET } else { 0 });
             let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { seed_a } else { 0.0 });
             let mut state = AppearanceGrowth::new(SIZE);
-            state.remember(Some(&previous), &mask, SEED_X.len() * BOX_Y.len());
+            remember_frame(&mut state, &previous, &mask);
             let counts = state.grow(
                 &growth,
                 &config,
@@ -1172,14 +1178,14 @@ mod tests {
             "no previous image"
         );
         let seeds = mask.clone();
-        state.remember(Some(&current), &seeds, 360);
+        remember_frame(&mut state, &current, &seeds);
         state.invalidate();
         assert_eq!(
             run(&mut state, &mut mask, &mut accumulation, 360),
             0,
             "after a reset"
         );
-        state.remember(Some(&current), &seeds, 360);
+        remember_frame(&mut state, &current, &seeds);
         let mut empty = Image::filled(SIZE, 0u8);
         assert_eq!(run(&mut state, &mut empty, &mut accumulation, 0), 0, "no objects");
     }

@@ -474,7 +474,7 @@ impl OcclusionDetector {
         self.delta_z_m.fill(0.0);
         self.newly_discovered.fill(0);
         self.frames = 1;
-        self.growth.remember(gray, &self.mask, 0);
+        self.growth.remember(gray);
     }
 
     /// Steps 2–13 for every frame after the first.
@@ -560,7 +560,10 @@ impl OcclusionDetector {
         let started = Instant::now();
         // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3) and the
         // pruning's label input. Pruning only removes pixels of P ⊆ O, so the mask size is
-        // |O| − pruned, and pruning is skipped when P is empty.
+        // |O| − pruned, and pruning is skipped when P is empty. The pass writes every pixel of
+        // the mask: the previous frame's final mask is first handed to the growth (a buffer
+        // swap, no copy).
+        self.growth.keep_mask(&mut self.mask);
         let objects = object_mask(
             &self.config,
             &self.accumulation_m,
@@ -606,7 +609,7 @@ impl OcclusionDetector {
             self.stats.mask_pixels += counts.grown;
             self.stats.growth_us = started.elapsed().as_micros() as u64;
         }
-        self.growth.remember(gray, &self.mask, self.stats.mask_pixels);
+        self.growth.remember(gray);
     }
 }
 
