@@ -145,6 +145,9 @@ pub(super) struct AppearanceGrowth {
     next: Vec<u32>,
     /// The seed scan's row bands (one parallel task each).
     bands: Vec<SeedBand>,
+    /// Ray-factor tables of the backward warp (per column, per row).
+    ray_x: Vec<f32>,
+    ray_y: Vec<f32>,
 }
 
 /// Rows of the seed scan per parallel task: a band's seeds are found independently and the
@@ -170,19 +173,44 @@ pub(super) struct GrowthCounts {
 }
 
 /// The static-world backward warp in f32: a current pixel (x, y) with depth Z is at
-/// R · (Z · ray) + t in the previous camera, projected into the previous image.
+/// R · (Z · ray) + t in the previous camera, projected into the previous image. The ray factors
+/// (x − cx)/fx and (y − cy)/fy come from per-column and per-row tables.
 #[derive(Debug, Clone, Copy)]
-struct BackwardWarp {
+struct BackwardWarp<'a> {
     r: nalgebra::Matrix3<f32>,
     t: nalgebra::Vector3<f32>,
     fx: f32,
     fy: f32,
     cx: f32,
     cy: f32,
+    ray_x: &'a [f32],
+    ray_y: &'a [f32],
 }
 
-impl BackwardWarp {
-    fn new(intrinsics: &PinholeIntrinsics, previous_from_current: &Isometry3<f64>) -> Self {
+/// Fills the ray-factor tables of [`BackwardWarp`] ((x − cx)/fx per column, (y − cy)/fy per row,
+/// in f32 exactly as a per-pixel division would give them).
+fn fill_ray_tables(intrinsics: &PinholeIntrinsics, ray_x: &mut [f32], ray_y: &mut [f32]) {
+    let (fx, fy, cx, cy) = (
+        intrinsics.fx as f32,
+        intrinsics.fy as f32,
+        intrinsics.cx as f32,
+        intrinsics.cy as f32,
+    );
+    for (x, ray) in ray_x.iter_mut().enumerate() {
+        *ray = (x as f32 - cx) / fx;
+    }
+    for (y, ray) in ray_y.iter_mut().enumerate() {
+        *ray = (y as f32 - cy) / fy;
+    }
+}
+
+impl<'a> BackwardWarp<'a> {
+    /// The warp of `previous_from_current`; `ray_x`, `ray_y` filled by [`fill_ray_tables`].
+    fn new(
+        intrinsics: &PinholeIntrinsics,
+        previous_from_current: &Isometry3<f64>,
+        (ray_x, ray_y): (&'a [f32], &'a [f32]),
+    ) -> Self {
         Self {
             r: previous_from_current
                 .rotation
@@ -194,6 +222,8 @@ impl BackwardWarp {
             fy: intrinsics.fy as f32,
             cx: intrinsics.cx as f32,
             cy: intrinsics.cy as f32,
+            ray_x,
+            ray_y,
         }
     }
 
@@ -201,11 +231,7 @@ impl BackwardWarp {
     #[inline]
     fn apply(&self, x: usize, y: usize, z_m: f32) -> Option<(f32, f32)> {
         let (r, t) = (&self.r, &self.t);
-        let p = [
-            (x as f32 - self.cx) / self.fx * z_m,
-            (y as f32 - self.cy) / self.fy * z_m,
-            z_m,
-        ];
+        let p = [self.ray_x[x] * z_m, self.ray_y[y] * z_m, z_m];
         let q = [
             r[(0, 0)] * p[0] + r[(0, 1)] * p[1] + r[(0, 2)] * p[2] + t[0],
             r[(1, 0)] * p[0] + r[(1, 1)] * p[1] + r[(1, 2)] * p[2] + t[1],
@@ -218,7 +244,7 @@ impl BackwardWarp {
 /// The inputs every growth test reads.
 struct Evidence<'a> {
     growth: &'a AppearanceGrowthConfig,
-    warp: BackwardWarp,
+    warp: BackwardWarp<'a>,
     width: usize,
     height: usize,
     depth_m: &'a [f32],
@@ -258,12 +284,25 @@ impl Evidence<'_> {
             return true;
         }
         let (un, vn) = ((u + 0.5) as usize, (v + 0.5) as usize);
+        let differs = |p: f32| (value - p).abs() > threshold;
+        if radius == 1 && un >= 1 && vn >= 1 && un < width - 1 && vn < height - 1 {
+            // The default radius away from the border: the 3×3 block, without branches.
+            let c = vn * width + un;
+            let rows = [
+                &previous[c - width - 1..c - width + 2],
+                &previous[c - 1..c + 2],
+                &previous[c + width - 1..c + width + 2],
+            ];
+            return rows.iter().fold(true, |all, row| {
+                all & differs(row[0]) & differs(row[1]) & differs(row[2])
+            });
+        }
         let (x0, x1) = (un.saturating_sub(radius), (un + radius).min(width - 1));
         let (y0, y1) = (vn.saturating_sub(radius), (vn + radius).min(height - 1));
         (y0..=y1).all(|y| {
             previous[y * width + x0..=y * width + x1]
                 .iter()
-                .all(|&p| (value - p).abs() > threshold)
+                .all(|&p| differs(p))
         })
     }
 
@@ -406,6 +445,8 @@ impl AppearanceGrowth {
                     boundary_row: vec![0; size.width],
                 })
                 .collect(),
+            ray_x: vec![0.0; size.width],
+            ray_y: vec![0.0; size.height],
         }
     }
 
@@ -468,9 +509,10 @@ impl AppearanceGrowth {
         if width < 3 || height < 3 {
             return counts;
         }
+        fill_ray_tables(intrinsics, &mut self.ray_x, &mut self.ray_y);
         let evidence = Evidence {
             growth,
-            warp: BackwardWarp::new(intrinsics, previous_from_current),
+            warp: BackwardWarp::new(intrinsics, previous_from_current, (&self.ray_x, &self.ray_y)),
             width,
             height,
             depth_m: depth_m.as_slice(),
@@ -621,9 +663,11 @@ mod tests {
         if !state.previous_valid || growth.max_rings == 0 {
             return 0;
         }
+        let (mut ray_x, mut ray_y) = (vec![0.0; width], vec![0.0; height]);
+        fill_ray_tables(intrinsics, &mut ray_x, &mut ray_y);
         let evidence = Evidence {
             growth,
-            warp: BackwardWarp::new(intrinsics, previous_from_current),
+            warp: BackwardWarp::new(intrinsics, previous_from_current, (&ray_x, &ray_y)),
             width,
             height,
             depth_m: depth_m.as_slice(),
