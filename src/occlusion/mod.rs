@@ -36,6 +36,7 @@
 mod components;
 pub mod consistency;
 mod growth;
+mod runs;
 pub mod transport;
 
 use std::time::Instant;
@@ -535,7 +536,7 @@ impl OcclusionDetector {
             predicted_carried: &mut self.predicted_carried,
             delta_z_m: &mut self.delta_z_m,
             newly_discovered: &mut self.newly_discovered,
-            object_labels: self.components.labels_mut(),
+            object_set: self.components.object_set_mut(),
         };
         let counts = if self.reference_transport {
             transport::transport_scalar(&inputs, outputs)
@@ -564,8 +565,8 @@ impl OcclusionDetector {
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
-        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3) and the
-        // pruning's label input. Pruning only removes pixels of P ⊆ O, so the mask size is
+        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3, the
+        // pruning's input). Pruning only removes pixels of P ⊆ O, so the mask size is
         // |O| − pruned, and pruning is skipped when P is empty.
         let objects = object_mask(
             &self.config,
@@ -575,7 +576,6 @@ impl OcclusionDetector {
             &self.newly_discovered,
             &mut self.mask,
             &mut self.predicted,
-            self.components.labels_mut(),
         );
         let object_pixels = objects.object;
         if let Some(bounds) = objects.predicted_bounds {
@@ -625,10 +625,8 @@ struct ObjectCounts {
     predicted_bounds: Option<PixelBounds>,
 }
 
-/// Steps 11–12 input, row-parallel: O = {A > τ_α} into `mask`, P = (P̂ ∨ Ñ) ∧ O into
-/// `predicted` (all 0 when prediction is off), and `labels` = [`transport::UNLABELLED`] on P,
-/// 0 elsewhere.
-#[allow(clippy::too_many_arguments)]
+/// Steps 11–12 input, row-parallel: O = {A > τ_α} into `mask` and P = (P̂ ∨ Ñ) ∧ O into
+/// `predicted` (all 0 when prediction is off).
 fn object_mask(
     config: &OcclusionConfig,
     accumulation_m: &DepthMeters,
@@ -637,7 +635,6 @@ fn object_mask(
     newly_discovered: &Image<u8>,
     mask: &mut Mask,
     predicted: &mut Image<u8>,
-    labels: &mut [u32],
 ) -> ObjectCounts {
     let width = mask.width();
     let chunk = transport::ROWS_PER_TASK * width;
@@ -650,9 +647,8 @@ fn object_mask(
     mask.as_mut_slice()
         .par_chunks_mut(chunk)
         .zip(predicted.as_mut_slice().par_chunks_mut(chunk))
-        .zip(labels[..accumulation_m.size().area()].par_chunks_mut(chunk))
         .enumerate()
-        .map(|(task, ((m_rows, p_rows), label_rows))| {
+        .map(|(task, (m_rows, p_rows))| {
             let mut counts = ObjectCounts::default();
             let start = task * chunk;
             let end = start + m_rows.len();
@@ -665,7 +661,6 @@ fn object_mask(
                 &newly_discovered.as_slice()[start..end],
                 m_rows,
                 p_rows,
-                label_rows,
             );
             counts.object = object_count as usize;
             if predicted_count > 0 {
