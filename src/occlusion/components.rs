@@ -31,6 +31,8 @@ pub(super) struct LabelStats {
     pub components: usize,
     pub small_components_erased: usize,
     pub predicted_pixels: usize,
+    /// Bounding box of the predicted (filled) pixels, None when none.
+    pub predicted_bounds: Option<PixelBounds>,
 }
 
 #[derive(Debug, Clone)]
@@ -40,7 +42,9 @@ pub(super) struct Components {
     /// The object set O₀ (0 / 1 per pixel, written by the transport), thinned by the opening,
     /// then labelled.
     object_set: Vec<u8>,
-    /// Prediction target (a copy of Ñ from which filled pixels are removed; shared by components).
+    /// Prediction target, shared by the components: 1 on the interior pixels of Ñ not filled
+    /// yet. Set from `target_pixels` when a labelling starts and cleared when it ends, so all 0
+    /// in between (no whole-image copy of Ñ per frame).
     target: Vec<u8>,
     /// The interior pixels of Ñ (where prediction may write), in row-major order.
     target_pixels: Vec<u32>,
@@ -56,9 +60,17 @@ pub(super) struct Components {
     /// Morphology scratch (0 / 1 per pixel).
     morph_a: Vec<u8>,
     morph_b: Vec<u8>,
-    /// Components of `set`.
+    /// Components of the object set.
     runs: RunLabelling,
+    /// Stamp every pixel of a component as prediction source (the reference for the agreement
+    /// test; the detector stamps only pixels next to the target).
+    stamp_all_sources: bool,
 }
+
+/// Pixels per segment of a run for the prediction's source stamps: short enough to skip most of
+/// a large component's interior, long enough that the neighbourhood test (three scans of
+/// `STAMP_SEGMENT + 2` bytes) costs less than stamping the segment (4 bytes per pixel).
+const STAMP_SEGMENT: usize = 64;
 
 /// `values.iter().position(|&v| v != 0)`, skipping 32 zero bytes at a time as four u64 words
 /// (Ñ is sparse: most of its rows hold no pixel).
@@ -140,6 +152,7 @@ impl Components {
             morph_a: vec![0; n],
             morph_b: vec![0; n],
             runs: RunLabelling::new(size.width, size.height),
+            stamp_all_sources: false,
         }
     }
 
@@ -175,7 +188,6 @@ impl Components {
             );
         }
         if config.predict_newly_discovered {
-            self.target.copy_from_slice(newly_discovered.as_slice());
             self.target_pixels.clear();
             let (width, height) = (self.width, self.height);
             // Interior rows and columns only (none in images narrower or lower than 3 px).
@@ -186,12 +198,15 @@ impl Components {
             };
             for y in interior_rows {
                 let first = y * width + 1;
-                let interior = &self.target[first..(y + 1) * width - 1];
+                let interior = &newly_discovered.as_slice()[first..(y + 1) * width - 1];
                 let mut x = 0;
                 while let Some(offset) = position_nonzero_u8(&interior[x..]) {
                     self.target_pixels.push((first + x + offset) as u32);
                     x += offset + 1;
                 }
+            }
+            for &t in &self.target_pixels {
+                self.target[t as usize] = 1;
             }
         }
         let (box_width, box_height) = box_dims(bounds);
@@ -210,7 +225,14 @@ impl Components {
                 }
                 stats.small_components_erased += 1;
             } else if config.predict_newly_discovered {
-                stats.predicted_pixels += self.predict(k, config, compensated_m, accumulation_m);
+                let (filled, filled_bounds) = self.predict(k, config, compensated_m, accumulation_m);
+                stats.predicted_pixels += filled;
+                stats.predicted_bounds = PixelBounds::union(stats.predicted_bounds, filled_bounds);
+            }
+        }
+        if config.predict_newly_discovered {
+            for &t in &self.target_pixels {
+                self.target[t as usize] = 0;
             }
         }
         stats
@@ -281,23 +303,47 @@ impl Components {
     }
 
     /// Breadth-first ring growth of component `k` of the last labelling into the shared
-    /// target set (algorithm.md §5.1, release sign A(n) + Z(n) − Z(ũ)). Returns pixels filled.
+    /// target set (algorithm.md §5.1, release sign A(n) + Z(n) − Z(ũ)). Returns the pixels
+    /// filled and their bounding box.
     fn predict(
         &mut self,
         k: usize,
         config: &OcclusionConfig,
         depth_m: &DepthMeters,
         accumulation_m: &mut DepthMeters,
-    ) -> usize {
+    ) -> (usize, Option<PixelBounds>) {
         let (width, height) = (self.width, self.height);
         let epoch = next_epoch(&mut self.source_epoch, &mut self.source_stamp);
         self.frontier.clear();
+        // The source set is only ever looked up at 4-neighbours of target pixels (candidates
+        // are target pixels, and the first ring tests the neighbours of target pixels), and the
+        // target only shrinks while a labelling runs: so only the component's pixels next to
+        // a current target pixel need a stamp. Stamped per segment of a run whose 3 × (len + 2)
+        // neighbourhood holds a target pixel (Ñ is a thin band; the components are large).
         for run in self.runs.runs(k) {
-            self.source_stamp[run.pixels(width)].fill(epoch);
+            let (y, row) = (run.y as usize, run.y as usize * width);
+            let mut x = run.x0 as usize;
+            while x < run.x1 as usize {
+                let end = (x + STAMP_SEGMENT).min(run.x1 as usize);
+                let window = x.saturating_sub(1)..(end + 1).min(width);
+                let near_target = self.stamp_all_sources
+                    || [y.wrapping_sub(1), y, y + 1].into_iter().any(|ny| {
+                        ny < height
+                            && position_nonzero_u8(
+                                &self.target[ny * width + window.start..ny * width + window.end],
+                            )
+                            .is_some()
+                    });
+                if near_target {
+                    self.source_stamp[row + x..row + end].fill(epoch);
+                }
+                x = end;
+            }
         }
         let z = depth_m.as_slice();
         let gate = config.prediction_depth_gate_m;
         let mut filled = 0;
+        let mut filled_bounds: Option<PixelBounds> = None;
         let mut first_ring = true;
         loop {
             // Candidates: interior target pixels 4-adjacent to the last ring (or the component).
@@ -368,13 +414,23 @@ impl Components {
                 self.target[u] = 0;
                 self.source_stamp[u] = epoch;
                 self.frontier.push(u as u32);
+                let (x, y) = (u % width, u / width);
+                filled_bounds = PixelBounds::union(
+                    filled_bounds,
+                    Some(PixelBounds {
+                        x0: x,
+                        x1: x,
+                        y0: y,
+                        y1: y,
+                    }),
+                );
             }
             filled += self.updates.len();
             if self.updates.is_empty() || terms <= config.prediction_stop_terms {
                 break;
             }
         }
-        filled
+        (filled, filled_bounds)
     }
 
     /// Step 12: erases (from A, O and P) every 8-connected component of `predicted` that has no
@@ -900,6 +956,102 @@ mod tests {
             }
         }
         assert!(some_pruned && some_kept && some_leaving);
+    }
+
+    #[test]
+    fn prediction_with_stamps_near_the_target_matches_stamping_every_source() {
+        let size = ImageSize::new(97, 71);
+        let mut state = 8642u64;
+        let mut next = |n: usize| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as usize % n
+        };
+        let mut predicted_total = 0;
+        for trial in 0..8 {
+            // Rectangles (some wider than a stamp segment, some small) with a band of Ñ on one
+            // side, scattered Ñ pixels, and a depth with steps so the gate matters.
+            let mut object = vec![0u8; size.area()];
+            let mut newly = Image::filled(size, 0u8);
+            for _ in 0..6 {
+                let (x0, y0) = (next(size.width - 10), next(size.height - 10));
+                let (w, h) = (2 + next(80), 2 + next(40));
+                let (x1, y1) = ((x0 + w).min(size.width - 1), (y0 + h).min(size.height - 1));
+                let band = 1 + next(6);
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        object[y * size.width + x] = 1;
+                    }
+                    for x in x1..(x1 + band).min(size.width) {
+                        newly.set(x, y, 1);
+                    }
+                }
+            }
+            for (o, n) in object.iter_mut().zip(newly.as_mut_slice()) {
+                if next(30) == 0 {
+                    *n = 1;
+                }
+                if *n != 0 {
+                    *o = 0;
+                }
+            }
+            let depth = DepthMeters::from_vec(
+                size,
+                (0..size.area())
+                    .map(|i| 1.0 + 0.01 * (i % size.width) as f32 + if next(12) == 0 { 0.3 } else { 0.0 })
+                    .collect(),
+            )
+            .unwrap();
+            let a = DepthMeters::from_vec(
+                size,
+                object
+                    .iter()
+                    .map(|&o| if o != 0 { 0.3 + 0.01 * next(10) as f32 } else { 0.0 })
+                    .collect(),
+            )
+            .unwrap();
+            let rows: Vec<usize> = (0..size.height)
+                .filter(|&y| object[y * size.width..(y + 1) * size.width].contains(&1))
+                .collect();
+            let columns: Vec<usize> = (0..size.width)
+                .filter(|&x| (0..size.height).any(|y| object[y * size.width + x] != 0))
+                .collect();
+            let bounds = PixelBounds {
+                x0: columns[0],
+                x1: *columns.last().unwrap(),
+                y0: rows[0],
+                y1: *rows.last().unwrap(),
+            };
+            let config = OcclusionConfig {
+                thin_structure_border_margin_px: 4,
+                ..OcclusionConfig::default()
+            };
+            let run = |stamp_all_sources: bool| {
+                let mut components = Components::new(size);
+                components.stamp_all_sources = stamp_all_sources;
+                components.object_set.copy_from_slice(&object);
+                let mut a = a.clone();
+                let stats =
+                    components.suppress_and_predict(&config, 20, Some(bounds), &depth, &newly, &mut a);
+                // The target is left all 0 for the next frame.
+                assert!(components.target.iter().all(|&t| t == 0));
+                let bits: Vec<u32> = a.as_slice().iter().map(|v| v.to_bits()).collect();
+                let counts = (
+                    stats.thin_pixels_erased,
+                    stats.components,
+                    stats.small_components_erased,
+                    stats.predicted_pixels,
+                    stats.predicted_bounds,
+                );
+                (counts, bits)
+            };
+            let (fast, reference) = (run(false), run(true));
+            assert_eq!(fast.0, reference.0, "trial {trial}");
+            assert!(fast.1 == reference.1, "trial {trial}");
+            predicted_total += reference.0 .3;
+        }
+        assert!(predicted_total > 500, "{predicted_total}");
     }
 
     #[test]

@@ -657,3 +657,45 @@ fn object_mask_builds_match_the_definition() {
         assert_eq!(run(Simd::Avx2), expected, "{threshold_form:?} {predicting}");
     }
 }
+
+#[test]
+fn the_mask_is_exactly_the_thresholded_accumulation_after_every_update() {
+    // The object-mask pass only evaluates A > τ_α inside the box of O₀ and the predicted
+    // pixels; that must lose nothing: without growth, O = {A > τ_α} on the whole image after
+    // every update (pruned pixels have A = 0), and P ⊆ O.
+    let sequence_config = SequenceConfig {
+        size: ImageSize::new(160, 120),
+        ..SequenceConfig::default()
+    };
+    let (mut predicted_frames, mut object_frames) = (0, 0);
+    for scenario in [Scenario::DominantObject, Scenario::EnteringWhilePanning] {
+        let sequence = SyntheticSequence::new(scenario, sequence_config);
+        let config = OcclusionConfig {
+            appearance_growth: None,
+            ..OcclusionConfig::default()
+        };
+        let mut detector =
+            OcclusionDetector::new(sequence_config.size, sequence_config.intrinsics(), config).unwrap();
+        for i in 0..sequence.len() {
+            let frame = sequence.frame(i);
+            detector
+                .update(&frame.depth_m, &sequence.current_from_previous(i))
+                .unwrap();
+            let (a, zc) = (
+                detector.accumulation_m().as_slice(),
+                detector.compensated_depth_m().as_slice(),
+            );
+            for (p, &m) in detector.mask().as_slice().iter().enumerate() {
+                let object = a[p] > config.threshold(config.alpha, zc[p]);
+                assert_eq!(m != 0, object, "{scenario:?} frame {i} pixel {p}");
+                assert!(detector.predicted_area().as_slice()[p] == 0 || object);
+            }
+            predicted_frames += usize::from(detector.stats().predicted_pixels > 0);
+            object_frames += usize::from(detector.stats().mask_pixels > 0);
+        }
+    }
+    assert!(
+        predicted_frames > 10 && object_frames > 100,
+        "{predicted_frames} {object_frames}"
+    );
+}
