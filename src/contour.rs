@@ -6,7 +6,7 @@
 //! with the set pixel on its right-hand side as seen on screen (y down); chaining the edges
 //! gives closed loops, clockwise on screen around regions and counter-clockwise around holes.
 //! Where two regions touch only at a corner the walk turns left, so diagonal neighbours belong
-//! to one region (8-connectivity, like the detector's flood fill). Outer loops are then
+//! to one region (8-connectivity, like the detector's labelling). Outer loops are then
 //! simplified with Douglas–Peucker so staircases become a few segments.
 
 use crate::image_buf::{Mask, MASK_SET};

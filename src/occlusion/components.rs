@@ -1,13 +1,19 @@
 //! Connected components, small-object suppression, occlusion prediction into the newly
 //! discovered area (algorithm.md §5.1, §9-Q5) and pruning of unattached predictions (§5.3).
-//! Sequential (flood fills), on preallocated buffers.
+//! Labelling by runs ([`super::runs`]), on preallocated buffers.
 
-use super::transport::{PixelBounds, UNLABELLED};
+use super::runs::{Run, RunLabelling};
+use super::transport::PixelBounds;
 use super::{Adjacency, OcclusionConfig};
 use crate::image_buf::{DepthMeters, Image, ImageSize, Mask};
 
+/// Label of a set pixel not yet assigned to a component (the reference flood fill's input).
+#[cfg(test)]
+const UNLABELLED: u32 = u32::MAX;
+
 const NEIGHBOURS_4: [(isize, isize); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
 /// The 8 neighbours as (dx, dy).
+#[cfg(test)]
 pub(super) const NEIGHBOURS_8: [(isize, isize); 8] = [
     (-1, -1),
     (0, -1),
@@ -26,17 +32,20 @@ pub(super) struct LabelStats {
     pub components: usize,
     pub small_components_erased: usize,
     pub predicted_pixels: usize,
+    /// Bounding box of the predicted (filled) pixels, None when none.
+    pub predicted_bounds: Option<PixelBounds>,
 }
 
 #[derive(Debug, Clone)]
 pub(super) struct Components {
     width: usize,
     height: usize,
-    /// 0 = not in the set, UNLABELLED = in the set, else component id.
-    labels: Vec<u32>,
-    stack: Vec<u32>,
-    component: Vec<u32>,
-    /// Prediction target (a copy of Ñ from which filled pixels are removed; shared by components).
+    /// The object set O₀ (0 / 1 per pixel, written by the transport), thinned by the opening,
+    /// then labelled.
+    object_set: Vec<u8>,
+    /// Prediction target, shared by the components: 1 on the interior pixels of Ñ not filled
+    /// yet. Set from `target_pixels` when a labelling starts and cleared when it ends, so all 0
+    /// in between (no whole-image copy of Ñ per frame).
     target: Vec<u8>,
     /// The interior pixels of Ñ (where prediction may write), in row-major order.
     target_pixels: Vec<u32>,
@@ -52,31 +61,22 @@ pub(super) struct Components {
     /// Morphology scratch (0 / 1 per pixel).
     morph_a: Vec<u8>,
     morph_b: Vec<u8>,
+    /// Components of the object set.
+    runs: RunLabelling,
+    /// Stamp every pixel of a component as prediction source (the reference for the agreement
+    /// test; the detector stamps only pixels next to the target).
+    stamp_all_sources: bool,
 }
 
-/// Elements per step of [`position_chunked`]: one or two AVX2 registers of u32 / u8.
-const SCAN_CHUNK: usize = 32;
-
-/// `values.iter().position(hit)`, but skips whole chunks of [`SCAN_CHUNK`] elements with a
-/// branch-free test the compiler vectorises (the scans for seeds, run ends and the newly
-/// discovered pixels mostly cross long stretches without a hit). Reference: `Iterator::position`
-/// (agreement test below).
-#[inline]
-fn position_chunked<T: Copy>(values: &[T], hit: impl Fn(T) -> bool) -> Option<usize> {
-    let (chunks, remainder) = values.as_chunks::<SCAN_CHUNK>();
-    for (k, chunk) in chunks.iter().enumerate() {
-        if chunk.iter().fold(false, |any, &v| any | hit(v)) {
-            return chunk.iter().position(|&v| hit(v)).map(|i| k * SCAN_CHUNK + i);
-        }
-    }
-    let base = chunks.len() * SCAN_CHUNK;
-    remainder.iter().position(|&v| hit(v)).map(|i| base + i)
-}
+/// Pixels per segment of a run for the prediction's source stamps: short enough to skip most of
+/// a large component's interior, long enough that the neighbourhood test (three scans of
+/// `STAMP_SEGMENT + 2` bytes) costs less than stamping the segment (4 bytes per pixel).
+const STAMP_SEGMENT: usize = 64;
 
 /// `values.iter().position(|&v| v != 0)`, skipping 32 zero bytes at a time as four u64 words
 /// (Ñ is sparse: most of its rows hold no pixel).
 #[inline]
-fn position_nonzero_u8(values: &[u8]) -> Option<usize> {
+pub(super) fn position_nonzero_u8(values: &[u8]) -> Option<usize> {
     let (chunks, remainder) = values.as_chunks::<32>();
     for (k, chunk) in chunks.iter().enumerate() {
         let (words, _) = chunk.as_chunks::<8>();
@@ -88,8 +88,36 @@ fn position_nonzero_u8(values: &[u8]) -> Option<usize> {
     remainder.iter().position(|&v| v != 0).map(|i| base + i)
 }
 
-/// Neighbour (x + dx, y + dy) if inside the image.
+/// `values.iter().position(|&v| v == 0)`, skipping 32 non-zero bytes at a time as four u64
+/// words (the run ends of the labelled sets: runs are mostly tens to hundreds of pixels long).
+/// A word holds a zero byte iff `(w − 0x01…01) & !w & 0x80…80` is non-zero (the borrow only
+/// propagates past a byte that is zero).
 #[inline]
+pub(super) fn position_zero_u8(values: &[u8]) -> Option<usize> {
+    const ONES: u64 = u64::from_ne_bytes([0x01; 8]);
+    const HIGHS: u64 = u64::from_ne_bytes([0x80; 8]);
+    let (chunks, remainder) = values.as_chunks::<32>();
+    for (k, chunk) in chunks.iter().enumerate() {
+        let (words, _) = chunk.as_chunks::<8>();
+        let zero_bytes = words.iter().fold(0, |any, w| {
+            let w = u64::from_ne_bytes(*w);
+            any | (w.wrapping_sub(ONES) & !w & HIGHS)
+        });
+        if zero_bytes != 0 {
+            return chunk.iter().position(|&v| v == 0).map(|i| k * 32 + i);
+        }
+    }
+    let base = chunks.len() * 32;
+    remainder.iter().position(|&v| v == 0).map(|i| base + i)
+}
+
+/// Columns and rows of `bounds`.
+fn box_dims(bounds: PixelBounds) -> (usize, usize) {
+    (bounds.x1 - bounds.x0 + 1, bounds.y1 - bounds.y0 + 1)
+}
+
+/// Neighbour (x + dx, y + dy) if inside the image.
+#[cfg(test)]
 fn neighbour(x: usize, y: usize, dx: isize, dy: isize, width: usize, height: usize) -> Option<usize> {
     let nx = x.checked_add_signed(dx)?;
     let ny = y.checked_add_signed(dy)?;
@@ -112,9 +140,7 @@ impl Components {
         Self {
             width: size.width,
             height: size.height,
-            labels: vec![0; n],
-            stack: Vec::with_capacity(n),
-            component: Vec::with_capacity(n),
+            object_set: vec![0; n],
             target: vec![0; n],
             target_pixels: Vec::with_capacity(n),
             source_stamp: vec![0; n],
@@ -126,112 +152,21 @@ impl Components {
             updates: Vec::with_capacity(n),
             morph_a: vec![0; n],
             morph_b: vec![0; n],
+            runs: RunLabelling::new(size.width, size.height),
+            stamp_all_sources: false,
         }
     }
 
-    /// Flood-fills the 8-connected component of `seed` (labels must hold UNLABELLED on set
-    /// pixels) with `id`, leaving its pixels in `self.component` (in scanline-run order; every
-    /// consumer of `self.component` is order-independent). Scanline algorithm: each popped seed
-    /// is extended to its whole horizontal run, and the rows above and below are scanned once
-    /// over the run's 8-neighbourhood, pushing one seed per unlabelled segment. Reference:
-    /// [`Components::flood_scalar`].
-    fn flood(&mut self, seed: usize, id: u32) {
-        let (width, height) = (self.width, self.height);
-        let labels = &mut self.labels;
-        self.component.clear();
-        self.stack.clear();
-        self.stack.push(seed as u32);
-        while let Some(p) = self.stack.pop() {
-            let p = p as usize;
-            if labels[p] != UNLABELLED {
-                continue;
-            }
-            let y = p / width;
-            let row_start = y * width;
-            let mut left = p;
-            while left > row_start && labels[left - 1] == UNLABELLED {
-                left -= 1;
-            }
-            let row_end = row_start + width;
-            let right =
-                p + position_chunked(&labels[p + 1..row_end], |l| l != UNLABELLED).unwrap_or(row_end - 1 - p);
-            labels[left..=right].fill(id);
-            self.component.extend(left as u32..=right as u32);
-            // 8-adjacency: the neighbour rows are scanned one column beyond the run on each side.
-            let x_first = (left - row_start).saturating_sub(1);
-            let x_last = (right - row_start + 1).min(width - 1);
-            for ny in [y.wrapping_sub(1), y + 1] {
-                if ny >= height {
-                    continue;
-                }
-                let neighbour_row = &labels[ny * width..(ny + 1) * width];
-                let mut x = x_first;
-                while x <= x_last {
-                    if neighbour_row[x] == UNLABELLED {
-                        self.stack.push((ny * width + x) as u32);
-                        while x <= x_last && neighbour_row[x] == UNLABELLED {
-                            x += 1;
-                        }
-                    } else {
-                        x += 1;
-                    }
-                }
-            }
-        }
+    /// The object-set buffer: the transport writes O₀ into it (1 on set pixels, 0 elsewhere)
+    /// before [`Components::suppress_and_predict`].
+    pub(super) fn object_set_mut(&mut self) -> &mut [u8] {
+        &mut self.object_set
     }
 
-    /// Reference flood fill: depth-first over the 8 neighbours of every pixel (for the
-    /// agreement test of [`Components::flood`]).
-    #[cfg(test)]
-    fn flood_scalar(&mut self, seed: usize, id: u32) {
-        let (width, height) = (self.width, self.height);
-        self.component.clear();
-        self.stack.clear();
-        self.labels[seed] = id;
-        self.stack.push(seed as u32);
-        while let Some(p) = self.stack.pop() {
-            let p = p as usize;
-            self.component.push(p as u32);
-            let (x, y) = (p % width, p / width);
-            for &(dx, dy) in &NEIGHBOURS_8 {
-                if let Some(n) = neighbour(x, y, dx, dy, width, height) {
-                    if self.labels[n] == UNLABELLED {
-                        self.labels[n] = id;
-                        self.stack.push(n as u32);
-                    }
-                }
-            }
-        }
-    }
-
-    /// The next [`UNLABELLED`] pixel in row-major order inside `bounds`, from `cursor` (row,
-    /// column) on; the cursor moves past it. Reference: the row-major loop over the box with a
-    /// label test per pixel.
-    fn next_unlabelled(&self, cursor: &mut (usize, usize), bounds: PixelBounds) -> Option<usize> {
-        let width = self.width;
-        while cursor.0 <= bounds.y1 {
-            let (y, x) = *cursor;
-            let row = &self.labels[y * width..y * width + bounds.x1 + 1];
-            if x < row.len() {
-                if let Some(offset) = position_chunked(&row[x..], |l| l == UNLABELLED) {
-                    *cursor = (y, x + offset + 1);
-                    return Some(y * width + x + offset);
-                }
-            }
-            *cursor = (y + 1, bounds.x0);
-        }
-        None
-    }
-
-    /// The label buffer: the transport writes the object set O₀ into it ([`UNLABELLED`] on set
-    /// pixels, 0 elsewhere) before [`Components::suppress_and_predict`].
-    pub(super) fn labels_mut(&mut self) -> &mut [u32] {
-        &mut self.labels
-    }
-
-    /// Step 10: labels the object set already in the label buffer (bounding box `bounds`),
+    /// Step 10: labels the object set already in the object-set buffer (bounding box `bounds`),
     /// erases components below `min_object_pixels` from A and, when enabled, grows the others
-    /// into Ñ.
+    /// into Ñ. Components are handled in the row-major order of their first pixel (they share
+    /// the prediction target, so the order matters).
     pub(super) fn suppress_and_predict(
         &mut self,
         config: &OcclusionConfig,
@@ -254,7 +189,6 @@ impl Components {
             );
         }
         if config.predict_newly_discovered {
-            self.target.copy_from_slice(newly_discovered.as_slice());
             self.target_pixels.clear();
             let (width, height) = (self.width, self.height);
             // Interior rows and columns only (none in images narrower or lower than 3 px).
@@ -265,40 +199,51 @@ impl Components {
             };
             for y in interior_rows {
                 let first = y * width + 1;
-                let interior = &self.target[first..(y + 1) * width - 1];
+                let interior = &newly_discovered.as_slice()[first..(y + 1) * width - 1];
                 let mut x = 0;
                 while let Some(offset) = position_nonzero_u8(&interior[x..]) {
                     self.target_pixels.push((first + x + offset) as u32);
                     x += offset + 1;
                 }
             }
+            for &t in &self.target_pixels {
+                self.target[t as usize] = 1;
+            }
         }
-        let mut next_id = 0u32;
-        // Seeds in row-major order; the set (and so every seed) lies in the bounding box. A
-        // flood only relabels pixels, so the scan goes on after the seed.
-        let mut cursor = (bounds.y0, bounds.x0);
-        while let Some(seed) = self.next_unlabelled(&mut cursor, bounds) {
-            next_id += 1;
-            self.flood(seed, next_id);
-            stats.components += 1;
-            if self.component.len() < min_object_pixels {
+        let (box_width, box_height) = box_dims(bounds);
+        stats.components = self.runs.label(
+            &self.object_set[bounds.y0 * self.width + bounds.x0..],
+            self.width,
+            box_width,
+            box_height,
+            (bounds.x0, bounds.y0),
+        );
+        for k in 0..stats.components {
+            if self.runs.pixels(k) < min_object_pixels {
                 let a = accumulation_m.as_mut_slice();
-                for &p in &self.component {
-                    a[p as usize] = 0.0;
+                for run in self.runs.runs(k) {
+                    a[run.pixels(self.width)].fill(0.0);
                 }
                 stats.small_components_erased += 1;
             } else if config.predict_newly_discovered {
-                stats.predicted_pixels += self.predict(config, compensated_m, accumulation_m);
+                let (filled, filled_bounds) = self.predict(k, config, compensated_m, accumulation_m);
+                stats.predicted_pixels += filled;
+                stats.predicted_bounds = PixelBounds::union(stats.predicted_bounds, filled_bounds);
+            }
+        }
+        if config.predict_newly_discovered {
+            for &t in &self.target_pixels {
+                self.target[t as usize] = 0;
             }
         }
         stats
     }
 
     /// Thin-structure filter (see `OcclusionConfig::thin_structure_radius_px`): opening of the
-    /// object set (labels ≠ 0) with a (2r+1)² square. Object pixels not covered by the opening
-    /// and farther than `border_margin_px` from the image border (where an object entering the
-    /// view first appears as a thin sliver) leave the object set and lose their accumulation,
-    /// like small components. Returns the pixels erased.
+    /// object set (`self.object_set`, inside its bounding box `bounds`) with a (2r+1)² square. Object pixels not
+    /// covered by the opening and farther than `border_margin_px` from the image border (where
+    /// an object entering the view first appears as a thin sliver) leave the object set and lose
+    /// their accumulation, like small components. Returns the pixels erased.
     fn erase_thin_structures(
         &mut self,
         radius: usize,
@@ -307,30 +252,20 @@ impl Components {
         accumulation_m: &mut DepthMeters,
     ) -> usize {
         let (width, height) = (self.width, self.height);
-        // The opening runs on the set's bounding box only, copied to a compact image: pixels
-        // outside the box are background, both in the set and in its erosion (a subset of the
-        // set), which is exactly how the filter treats pixels outside its image.
-        let (box_width, box_height) = (bounds.x1 - bounds.x0 + 1, bounds.y1 - bounds.y0 + 1);
+        // The opening runs on the set's bounding box only: pixels outside the box are
+        // background, both in the set and in its erosion (a subset of the set), which is
+        // exactly how the filter treats pixels outside its image.
+        let (box_width, box_height) = box_dims(bounds);
         let box_area = box_width * box_height;
-        for (m_row, l_row) in self.morph_a[..box_area]
-            .chunks_exact_mut(box_width)
-            .zip(self.labels.chunks_exact(width).skip(bounds.y0))
-        {
-            for (m, &l) in m_row.iter_mut().zip(&l_row[bounds.x0..=bounds.x1]) {
-                *m = u8::from(l != 0);
-            }
-        }
-        // Erosion (outside the image counts as background), then dilation.
-        for erode in [true, false] {
-            square_filter(
-                &mut self.morph_a[..box_area],
-                &mut self.morph_b[..box_area],
-                box_width,
-                box_height,
-                radius,
-                erode,
-            );
-        }
+        let (opened, scratch) = (&mut self.morph_a[..box_area], &mut self.morph_b[..box_area]);
+        let set_box = &self.object_set[bounds.y0 * width + bounds.x0..];
+        // Erosion (outside the image counts as background) into `opened`, then dilation; the
+        // filtered images are compact (rows of the box's width).
+        square_filter(
+            set_box, width, scratch, opened, box_width, box_height, radius, true,
+        );
+        square_rows(opened, box_width, scratch, box_width, box_height, radius, false);
+        square_columns(scratch, opened, box_width, box_height, radius, false);
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
         // Interior columns of the box (pixels nearer the border than the margin are kept).
@@ -339,44 +274,77 @@ impl Components {
         if x_first >= x_end {
             return 0;
         }
-        for (box_y, opened_row) in self.morph_a[..box_area].chunks_exact(box_width).enumerate() {
+        let columns = x_first - bounds.x0..x_end - bounds.x0;
+        for (box_y, opened_row) in opened.chunks_exact(box_width).enumerate() {
             let y = bounds.y0 + box_y;
             if y < border_margin_px || y + border_margin_px >= height {
                 continue;
             }
-            // Branch-free over the row's interior columns, so the loop vectorises.
-            let row = y * width + x_first..y * width + x_end;
-            let opened_row = &opened_row[x_first - bounds.x0..x_end - bounds.x0];
-            let (labels, a_row) = (&mut self.labels[row.clone()], &mut a[row]);
-            let mut row_erased = 0u32;
-            for ((label, a), &opened) in labels.iter_mut().zip(a_row.iter_mut()).zip(opened_row) {
-                let erase = (*label != 0) & (opened == 0);
-                *label = if erase { 0 } else { *label };
-                *a = if erase { 0.0 } else { *a };
-                row_erased += u32::from(erase);
+            let set_row = &mut self.object_set[y * width + x_first..y * width + x_end];
+            let opened_row = &opened_row[columns.clone()];
+            // Both are 0 / 1: erased = set ∧ ¬opened. A branch-free count first (it vectorises;
+            // most rows erase nothing), then the rare erasing rows pixel by pixel.
+            let row_erased = set_row
+                .iter()
+                .zip(opened_row)
+                .fold(0u32, |n, (&s, &o)| n + u32::from(s & (o ^ 1)));
+            if row_erased == 0 {
+                continue;
+            }
+            let a_row = &mut a[y * width + x_first..y * width + x_end];
+            for ((s, &o), a) in set_row.iter_mut().zip(opened_row).zip(a_row) {
+                if *s & (o ^ 1) != 0 {
+                    *s = 0;
+                    *a = 0.0;
+                }
             }
             erased += row_erased as usize;
         }
         erased
     }
 
-    /// Breadth-first ring growth of the current component (`self.component`) into the shared
-    /// target set (algorithm.md §5.1, release sign A(n) + Z(n) − Z(ũ)). Returns pixels filled.
+    /// Breadth-first ring growth of component `k` of the last labelling into the shared
+    /// target set (algorithm.md §5.1, release sign A(n) + Z(n) − Z(ũ)). Returns the pixels
+    /// filled and their bounding box.
     fn predict(
         &mut self,
+        k: usize,
         config: &OcclusionConfig,
         depth_m: &DepthMeters,
         accumulation_m: &mut DepthMeters,
-    ) -> usize {
+    ) -> (usize, Option<PixelBounds>) {
         let (width, height) = (self.width, self.height);
         let epoch = next_epoch(&mut self.source_epoch, &mut self.source_stamp);
         self.frontier.clear();
-        for &p in &self.component {
-            self.source_stamp[p as usize] = epoch;
+        // The source set is only ever looked up at 4-neighbours of target pixels (candidates
+        // are target pixels, and the first ring tests the neighbours of target pixels), and the
+        // target only shrinks while a labelling runs: so only the component's pixels next to
+        // a current target pixel need a stamp. Stamped per segment of a run whose 3 × (len + 2)
+        // neighbourhood holds a target pixel (Ñ is a thin band; the components are large).
+        for run in self.runs.runs(k) {
+            let (y, row) = (run.y as usize, run.y as usize * width);
+            let mut x = run.x0 as usize;
+            while x < run.x1 as usize {
+                let end = (x + STAMP_SEGMENT).min(run.x1 as usize);
+                let window = x.saturating_sub(1)..(end + 1).min(width);
+                let near_target = self.stamp_all_sources
+                    || [y.wrapping_sub(1), y, y + 1].into_iter().any(|ny| {
+                        ny < height
+                            && position_nonzero_u8(
+                                &self.target[ny * width + window.start..ny * width + window.end],
+                            )
+                            .is_some()
+                    });
+                if near_target {
+                    self.source_stamp[row + x..row + end].fill(epoch);
+                }
+                x = end;
+            }
         }
         let z = depth_m.as_slice();
         let gate = config.prediction_depth_gate_m;
         let mut filled = 0;
+        let mut filled_bounds: Option<PixelBounds> = None;
         let mut first_ring = true;
         loop {
             // Candidates: interior target pixels 4-adjacent to the last ring (or the component).
@@ -447,27 +415,94 @@ impl Components {
                 self.target[u] = 0;
                 self.source_stamp[u] = epoch;
                 self.frontier.push(u as u32);
+                let (x, y) = (u % width, u / width);
+                filled_bounds = PixelBounds::union(
+                    filled_bounds,
+                    Some(PixelBounds {
+                        x0: x,
+                        x1: x,
+                        y0: y,
+                        y1: y,
+                    }),
+                );
             }
             filled += self.updates.len();
             if self.updates.is_empty() || terms <= config.prediction_stop_terms {
                 break;
             }
         }
-        filled
+        (filled, filled_bounds)
     }
 
     /// Step 12: erases (from A, O and P) every 8-connected component of `predicted` that has no
     /// pixel adjacent to an object pixel outside `predicted`, unless it is a leaving object's
     /// remainder: it holds a pixel of `predicted_carried` (predicted object in the previous
-    /// frame) and reaches within `config.prune_exit_margin_px` of the image border. The label
-    /// buffer must hold [`UNLABELLED`] on `predicted` pixels and 0 elsewhere (the detector's
-    /// object-mask pass writes it), and `predicted` must be empty outside `bounds`. P is cleared
+    /// frame) and reaches within `config.prune_exit_margin_px` of the image border.
+    /// `predicted` (0 / 1) must be empty outside the rows of `bounds` (its columns are not
+    /// used). Erasing a component does not change the others' tests (its pixels were not
+    /// non-predicted object pixels before either), so the order does not matter. P is cleared
     /// on erased components so that "carried from P" always means "predicted object that
     /// survived pruning" (the release leaves P set there). Returns the pixels erased.
     pub(super) fn prune_unattached_predictions(
         &mut self,
         config: &OcclusionConfig,
         bounds: PixelBounds,
+        predicted_carried: &Image<u8>,
+        predicted: &mut Image<u8>,
+        mask: &mut Mask,
+        accumulation_m: &mut DepthMeters,
+    ) -> usize {
+        let (width, height) = (self.width, self.height);
+        let exit_margin_px = config.prune_exit_margin_px;
+        let carried = predicted_carried.as_slice();
+        // A run reaches near the border when its first or last pixel does.
+        let near_border = |run: &Run| {
+            let (x_first, x_last, y) = (run.x0 as usize, run.x1 as usize - 1, run.y as usize);
+            x_first < exit_margin_px
+                || y < exit_margin_px
+                || x_last + exit_margin_px >= width
+                || y + exit_margin_px >= height
+        };
+        let diagonal = config.prune_adjacency == Adjacency::Eight;
+        let count = self.runs.label(
+            &predicted.as_slice()[bounds.y0 * width..],
+            width,
+            width,
+            bounds.y1 - bounds.y0 + 1,
+            (0, bounds.y0),
+        );
+        let mut pruned = 0;
+        for k in 0..count {
+            let runs = self.runs.runs(k);
+            let (m, p) = (mask.as_slice(), predicted.as_slice());
+            let attached = runs
+                .iter()
+                .any(|run| run_attached(run, width, height, diagonal, m, p));
+            // An object leaving the view: its non-predicted part went out through the border
+            // and the rest, predicted at some earlier frame and object since, is still there.
+            let leaving = exit_margin_px > 0
+                && runs
+                    .iter()
+                    .any(|run| carried[run.pixels(width)].iter().any(|&c| c != 0))
+                && runs.iter().any(near_border);
+            if !attached && !leaving {
+                for run in runs {
+                    mask.as_mut_slice()[run.pixels(width)].fill(0);
+                    accumulation_m.as_mut_slice()[run.pixels(width)].fill(0.0);
+                    predicted.as_mut_slice()[run.pixels(width)].fill(0);
+                }
+                pruned += self.runs.pixels(k);
+            }
+        }
+        pruned
+    }
+
+    /// Reference pruning: flood fill per component and a neighbour test per pixel (for the
+    /// agreement test of [`Components::prune_unattached_predictions`]).
+    #[cfg(test)]
+    fn prune_unattached_predictions_scalar(
+        &self,
+        config: &OcclusionConfig,
         predicted_carried: &Image<u8>,
         predicted: &mut Image<u8>,
         mask: &mut Mask,
@@ -487,50 +522,139 @@ impl Components {
             Adjacency::Four => &NEIGHBOURS_4,
             Adjacency::Eight => &NEIGHBOURS_8,
         };
+        let mut labels: Vec<u32> = predicted
+            .as_slice()
+            .iter()
+            .map(|&p| if p != 0 { UNLABELLED } else { 0 })
+            .collect();
         let mut pruned = 0;
         let mut next_id = 0u32;
-        let mut cursor = (bounds.y0, bounds.x0);
-        while let Some(seed) = self.next_unlabelled(&mut cursor, bounds) {
+        for seed in 0..width * height {
+            if labels[seed] != UNLABELLED {
+                continue;
+            }
             next_id += 1;
-            self.flood(seed, next_id);
+            let component = flood_scalar(&mut labels, width, height, seed, next_id);
             let (m, p) = (mask.as_slice(), predicted.as_slice());
-            let attached = self.component.iter().any(|&q| {
+            let attached = component.iter().any(|&q| {
                 let (x, y) = (q as usize % width, q as usize / width);
                 neighbours.iter().any(|&(dx, dy)| {
                     neighbour(x, y, dx, dy, width, height).is_some_and(|n| m[n] != 0 && p[n] == 0)
                 })
             });
-            // An object leaving the view: its non-predicted part went out through the border
-            // and the rest, predicted at some earlier frame and object since, is still there.
             let leaving = exit_margin_px > 0
-                && self.component.iter().any(|&q| carried[q as usize] != 0)
-                && self.component.iter().any(|&q| near_border(q));
+                && component.iter().any(|&q| carried[q as usize] != 0)
+                && component.iter().any(|&q| near_border(q));
             if !attached && !leaving {
                 let (m, a, p) = (
                     mask.as_mut_slice(),
                     accumulation_m.as_mut_slice(),
                     predicted.as_mut_slice(),
                 );
-                for &q in &self.component {
+                for &q in &component {
                     m[q as usize] = 0;
                     a[q as usize] = 0.0;
                     p[q as usize] = 0;
                 }
-                pruned += self.component.len();
+                pruned += component.len();
             }
         }
         pruned
     }
 }
 
-/// Separable square min (`erode`) or max filter of radius `r` over the 0/1 image `image`, in place
-/// (`scratch` holds the row pass); pixels outside the image count as 0. Each pass combines the
-/// image with its shifts by 1..=r pixels (rows), whole slices at a time so the compiler
+/// Whether a pixel of `run` has a 4-neighbour (8-neighbour when `diagonal`) that is an object
+/// pixel (`mask` ≠ 0) outside the predicted set (`predicted` = 0). The run is maximal, so only
+/// its two ends have neighbours in its own row.
+fn run_attached(
+    run: &Run,
+    width: usize,
+    height: usize,
+    diagonal: bool,
+    mask: &[u8],
+    predicted: &[u8],
+) -> bool {
+    let (x0, x1, y) = (run.x0 as usize, run.x1 as usize, run.y as usize);
+    let row = y * width;
+    let outside_object = |i: usize| mask[i] != 0 && predicted[i] == 0;
+    if (x0 > 0 && outside_object(row + x0 - 1)) || (x1 < width && outside_object(row + x1)) {
+        return true;
+    }
+    let (first, end) = if diagonal {
+        (x0.saturating_sub(1), (x1 + 1).min(width))
+    } else {
+        (x0, x1)
+    };
+    [y.wrapping_sub(1), y + 1]
+        .into_iter()
+        .filter(|&ny| ny < height)
+        .any(|ny| {
+            let range = ny * width + first..ny * width + end;
+            // Branch-free over the range (it vectorises).
+            mask[range.clone()]
+                .iter()
+                .zip(&predicted[range])
+                .fold(false, |any, (&m, &p)| any | ((m != 0) & (p == 0)))
+        })
+}
+
+/// Reference flood fill: depth-first over the 8 neighbours of every pixel of `labels` holding
+/// [`UNLABELLED`], from `seed`; labels the component `id` and returns its pixels.
+#[cfg(test)]
+fn flood_scalar(labels: &mut [u32], width: usize, height: usize, seed: usize, id: u32) -> Vec<u32> {
+    let mut component = Vec::new();
+    let mut stack = vec![seed as u32];
+    labels[seed] = id;
+    while let Some(p) = stack.pop() {
+        let p = p as usize;
+        component.push(p as u32);
+        let (x, y) = (p % width, p / width);
+        for &(dx, dy) in &NEIGHBOURS_8 {
+            if let Some(n) = neighbour(x, y, dx, dy, width, height) {
+                if labels[n] == UNLABELLED {
+                    labels[n] = id;
+                    stack.push(n as u32);
+                }
+            }
+        }
+    }
+    component
+}
+
+/// Separable square min (`erode`) or max filter of radius `r` over the 0/1 image `source` into
+/// `out` (`scratch` holds the row pass); pixels outside the image count as 0. Each pass combines
+/// the image with its shifts by 1..=r pixels (rows), whole slices at a time so the compiler
 /// vectorises it: O(r) per pixel, at 16+ pixels per instruction (r is 1 by default).
-fn square_filter(image: &mut [u8], scratch: &mut [u8], width: usize, height: usize, r: usize, erode: bool) {
+/// `source` row y starts at `source[y * source_stride]`; `out` and `scratch` are compact (rows of
+/// `width`). Reference: [`square_filter_scalar`].
+#[allow(clippy::too_many_arguments)]
+fn square_filter(
+    source: &[u8],
+    source_stride: usize,
+    scratch: &mut [u8],
+    out: &mut [u8],
+    width: usize,
+    height: usize,
+    r: usize,
+    erode: bool,
+) {
+    square_rows(source, source_stride, scratch, width, height, r, erode);
+    square_columns(scratch, out, width, height, r, erode);
+}
+
+/// Row pass of [`square_filter`]: `out[x]` = min / max of `source` row `[x − r, x + r]`.
+fn square_rows(
+    source: &[u8],
+    source_stride: usize,
+    out: &mut [u8],
+    width: usize,
+    height: usize,
+    r: usize,
+    erode: bool,
+) {
     let combine = |a: u8, b: u8| if erode { a.min(b) } else { a.max(b) };
-    // Row pass: scratch[x] = op of row[x − r ..= x + r].
-    for (row, out) in image.chunks_exact(width).zip(scratch.chunks_exact_mut(width)) {
+    for (y, out) in out.chunks_exact_mut(width).take(height).enumerate() {
+        let row = &source[y * source_stride..y * source_stride + width];
         out.copy_from_slice(row);
         for k in 1..=r.min(width) {
             for (o, &v) in out[..width - k].iter_mut().zip(&row[k..]) {
@@ -547,18 +671,21 @@ fn square_filter(image: &mut [u8], scratch: &mut [u8], width: usize, height: usi
             out[width - edge..].fill(0);
         }
     }
-    // Column pass: image row y = op of scratch rows y − r ..= y + r.
-    for y in 0..height {
-        let out = &mut image[y * width..(y + 1) * width];
+}
+
+/// Column pass of [`square_filter`]: `out` row y = min / max of `source` rows `[y − r, y + r]`.
+fn square_columns(source: &[u8], out: &mut [u8], width: usize, height: usize, r: usize, erode: bool) {
+    let combine = |a: u8, b: u8| if erode { a.min(b) } else { a.max(b) };
+    for (y, out) in out.chunks_exact_mut(width).take(height).enumerate() {
         if erode && (y < r || y + r >= height) {
             out.fill(0);
             continue;
         }
-        out.copy_from_slice(&scratch[y * width..(y + 1) * width]);
+        out.copy_from_slice(&source[y * width..(y + 1) * width]);
         let first = y.saturating_sub(r);
         let last = (y + r).min(height - 1);
         for other in (first..=last).filter(|&other| other != y) {
-            for (o, &v) in out.iter_mut().zip(&scratch[other * width..(other + 1) * width]) {
+            for (o, &v) in out.iter_mut().zip(&source[other * width..(other + 1) * width]) {
                 *o = combine(*o, v);
             }
         }
@@ -592,29 +719,20 @@ fn square_filter_scalar(image: &[u8], width: usize, height: usize, r: usize, ero
 mod tests {
     use super::*;
 
-    /// Labels every component of `set` with `fill` and returns the labels and each component's
-    /// sorted pixels.
-    fn label_all(set: &[u8], size: ImageSize, scanline: bool) -> (Vec<u32>, Vec<Vec<u32>>) {
-        let mut components = Components::new(size);
-        for (l, &v) in components.labels.iter_mut().zip(set) {
-            *l = if v != 0 { UNLABELLED } else { 0 };
-        }
+    /// The components of `set` by the reference flood fill, in seed (row-major) order, each as
+    /// its sorted pixels.
+    fn label_all(set: &[u8], size: ImageSize) -> Vec<Vec<u32>> {
+        let mut labels: Vec<u32> = set.iter().map(|&v| if v != 0 { UNLABELLED } else { 0 }).collect();
         let mut found = Vec::new();
-        let mut id = 0;
         for seed in 0..set.len() {
-            if components.labels[seed] == UNLABELLED {
-                id += 1;
-                if scanline {
-                    components.flood(seed, id);
-                } else {
-                    components.flood_scalar(seed, id);
-                }
-                let mut pixels = components.component.clone();
+            if labels[seed] == UNLABELLED {
+                let mut pixels =
+                    flood_scalar(&mut labels, size.width, size.height, seed, found.len() as u32 + 1);
                 pixels.sort_unstable();
                 found.push(pixels);
             }
         }
-        (components.labels, found)
+        found
     }
 
     #[test]
@@ -627,27 +745,6 @@ mod tests {
             (state >> 33) as u32
         };
         // Hits from dense to absent, lengths around the chunk size.
-        for len in [0, 1, 31, 32, 33, 64, 100, 257] {
-            for one_in in [1, 5, 40, 1000, u32::MAX] {
-                let values: Vec<u32> = (0..len)
-                    .map(|_| {
-                        if next() % one_in == 0 {
-                            UNLABELLED
-                        } else {
-                            next() % 3
-                        }
-                    })
-                    .collect();
-                for start in [0, len / 3, len] {
-                    let hit = |l: u32| l == UNLABELLED;
-                    assert_eq!(
-                        position_chunked(&values[start..], hit),
-                        values[start..].iter().position(|&l| hit(l)),
-                        "len {len} one in {one_in} start {start}"
-                    );
-                }
-            }
-        }
         for len in [0, 1, 31, 32, 33, 64, 100, 257] {
             for one_in in [1, 5, 40, 1000, u32::MAX] {
                 let values: Vec<u8> = (0..len)
@@ -665,66 +762,297 @@ mod tests {
                         values[start..].iter().position(|&v| v != 0),
                         "len {len} one in {one_in} start {start}"
                     );
+                    // The same bytes inverted: long non-zero stretches with sparse zeros,
+                    // including 0x80 and 0x01 bytes (the word trick's edge cases).
+                    let inverted: Vec<u8> = values[start..]
+                        .iter()
+                        .map(|&v| {
+                            if v == 0 {
+                                [1u8, 0x80, 0xff, 0x7f][(next() % 4) as usize]
+                            } else {
+                                0
+                            }
+                        })
+                        .collect();
+                    assert_eq!(
+                        position_zero_u8(&inverted),
+                        inverted.iter().position(|&v| v == 0),
+                        "len {len} one in {one_in} start {start}"
+                    );
                 }
             }
-        }
-        // Seeds inside boxes: the cursor walk visits the box's unlabelled pixels in row-major order.
-        let size = ImageSize::new(75, 21);
-        let mut components = Components::new(size);
-        for l in components.labels.iter_mut() {
-            *l = if next() % 7 == 0 { UNLABELLED } else { next() % 4 };
-        }
-        for bounds in [
-            PixelBounds {
-                x0: 0,
-                x1: 74,
-                y0: 0,
-                y1: 20,
-            },
-            PixelBounds {
-                x0: 3,
-                x1: 40,
-                y0: 5,
-                y1: 5,
-            },
-            PixelBounds {
-                x0: 33,
-                x1: 74,
-                y0: 2,
-                y1: 19,
-            },
-        ] {
-            let expected: Vec<usize> = (bounds.y0..=bounds.y1)
-                .flat_map(|y| (bounds.x0..=bounds.x1).map(move |x| y * size.width + x))
-                .filter(|&i| components.labels[i] == UNLABELLED)
-                .collect();
-            let mut cursor = (bounds.y0, bounds.x0);
-            let found: Vec<usize> =
-                std::iter::from_fn(|| components.next_unlabelled(&mut cursor, bounds)).collect();
-            assert!(!expected.is_empty());
-            assert_eq!(found, expected, "{bounds:?}");
         }
     }
 
     #[test]
-    fn scanline_flood_fill_matches_the_reference() {
-        let size = ImageSize::new(53, 31);
-        let mut state = 987654321u64;
-        for density in [3u64, 4, 6] {
+    fn run_labelling_matches_the_reference_flood_fill() {
+        let size = ImageSize::new(67, 29);
+        let mut state = 13579u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as u32
+        };
+        let mut runs = RunLabelling::new(size.width, size.height);
+        // Sparse to dense random sets (many touching runs, diagonal contacts), plus runs that
+        // reach the window's edges.
+        for density in [1u32, 3, 4, 5, 6, 9, 10] {
             let set: Vec<u8> = (0..size.area())
-                .map(|_| {
-                    state = state
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    u8::from((state >> 33) % 10 < density)
-                })
+                .map(|_| u8::from(next() % 10 < density))
                 .collect();
-            let (fast_labels, fast_components) = label_all(&set, size, true);
-            let (slow_labels, slow_components) = label_all(&set, size, false);
-            assert!(slow_components.len() > 1, "density {density}");
-            assert_eq!(fast_labels, slow_labels, "density {density}");
-            assert_eq!(fast_components, slow_components, "density {density}");
+            // Whole image, and a window of it (the rest cleared) read through a stride.
+            for (x0, y0, x1, y1) in [(0, 0, 66, 28), (5, 3, 40, 20), (0, 7, 66, 7), (30, 0, 30, 28)] {
+                let windowed: Vec<u8> = (0..size.area())
+                    .map(|i| {
+                        let (x, y) = (i % size.width, i / size.width);
+                        let inside = (x0..=x1).contains(&x) && (y0..=y1).contains(&y);
+                        if inside {
+                            set[i]
+                        } else {
+                            0
+                        }
+                    })
+                    .collect();
+                let expected = label_all(&windowed, size);
+                let count = runs.label(
+                    &windowed[y0 * size.width + x0..],
+                    size.width,
+                    x1 - x0 + 1,
+                    y1 - y0 + 1,
+                    (x0, y0),
+                );
+                let found: Vec<Vec<u32>> = (0..count)
+                    .map(|k| {
+                        let component = runs.runs(k);
+                        assert!(component
+                            .windows(2)
+                            .all(|w| (w[0].y, w[0].x0) < (w[1].y, w[1].x0)));
+                        let pixels: Vec<u32> = component
+                            .iter()
+                            .flat_map(|run| run.pixels(size.width))
+                            .map(|p| p as u32)
+                            .collect();
+                        assert_eq!(pixels.len(), runs.pixels(k));
+                        pixels
+                    })
+                    .collect();
+                if density <= 4 && x1 > x0 {
+                    assert!(expected.len() > 1, "density {density}");
+                }
+                assert_eq!(found, expected, "density {density} window {x0} {y0} {x1} {y1}");
+            }
         }
+        // Empty and full windows.
+        let size = ImageSize::new(9, 4);
+        let (empty, full) = (vec![0u8; size.area()], vec![1u8; size.area()]);
+        assert_eq!(runs.label(&empty, 9, 9, 4, (0, 0)), 0);
+        assert_eq!(runs.label(&full, 9, 9, 4, (0, 0)), 1);
+        assert_eq!(runs.pixels(0), 36);
+        assert_eq!(runs.runs(0).len(), 4);
+    }
+
+    #[test]
+    fn run_pruning_matches_the_reference_pruning() {
+        let size = ImageSize::new(71, 43);
+        let mut state = 2468u64;
+        let mut next = |n: usize| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as usize % n
+        };
+        let (mut some_pruned, mut some_kept, mut some_leaving) = (false, false, false);
+        for trial in 0..12 {
+            // Object rectangles, predicted rectangles (and scattered pixels) inside the objects,
+            // some reaching the border; carried pixels scattered.
+            let mut mask = Mask::filled(size, 0);
+            let mut predicted = Image::filled(size, 0u8);
+            let mut carried = Image::filled(size, 0u8);
+            for (rectangles, value) in [(4, 0u8), (14, 1)] {
+                for _ in 0..rectangles {
+                    let (x0, y0) = (next(size.width), next(size.height));
+                    let (x1, y1) = (
+                        (x0 + 1 + next(20)).min(size.width),
+                        (y0 + 1 + next(15)).min(size.height),
+                    );
+                    for y in y0..y1 {
+                        for x in x0..x1 {
+                            if value == 0 {
+                                mask.set(x, y, crate::image_buf::MASK_SET);
+                            } else if mask.get(x, y) != 0 {
+                                predicted.set(x, y, 1);
+                            }
+                        }
+                    }
+                }
+            }
+            for i in 0..size.area() {
+                if next(20) == 0 {
+                    carried.as_mut_slice()[i] = 1;
+                }
+                if next(40) == 0 {
+                    mask.as_mut_slice()[i] = crate::image_buf::MASK_SET;
+                    predicted.as_mut_slice()[i] = 1;
+                }
+            }
+            let rows: Vec<usize> = (0..size.height)
+                .filter(|&y| predicted.row(y).iter().any(|&p| p != 0))
+                .collect();
+            let bounds = PixelBounds {
+                x0: 0,
+                x1: size.width - 1,
+                y0: rows[0],
+                y1: *rows.last().unwrap(),
+            };
+            let a = DepthMeters::from_vec(size, (0..size.area()).map(|i| 1.0 + i as f32).collect()).unwrap();
+            for (adjacency, exit_margin_px) in
+                [(Adjacency::Four, 0), (Adjacency::Four, 8), (Adjacency::Eight, 3)]
+            {
+                let config = OcclusionConfig {
+                    prune_adjacency: adjacency,
+                    prune_exit_margin_px: exit_margin_px,
+                    ..OcclusionConfig::default()
+                };
+                let mut components = Components::new(size);
+                let (mut fast_mask, mut fast_p, mut fast_a) = (mask.clone(), predicted.clone(), a.clone());
+                let fast = components.prune_unattached_predictions(
+                    &config,
+                    bounds,
+                    &carried,
+                    &mut fast_p,
+                    &mut fast_mask,
+                    &mut fast_a,
+                );
+                let (mut slow_mask, mut slow_p, mut slow_a) = (mask.clone(), predicted.clone(), a.clone());
+                let slow = components.prune_unattached_predictions_scalar(
+                    &config,
+                    &carried,
+                    &mut slow_p,
+                    &mut slow_mask,
+                    &mut slow_a,
+                );
+                let context = format!("trial {trial} {adjacency:?} margin {exit_margin_px}");
+                assert_eq!(fast, slow, "{context}");
+                assert_eq!(fast_mask, slow_mask, "{context}");
+                assert_eq!(fast_p, slow_p, "{context}");
+                assert_eq!(fast_a.as_slice(), slow_a.as_slice(), "{context}");
+                some_pruned |= slow > 0;
+                some_kept |= slow_p.as_slice().iter().any(|&p| p != 0);
+                if exit_margin_px == 8 {
+                    let mut no_exit = (mask.clone(), predicted.clone(), a.clone());
+                    let config = OcclusionConfig {
+                        prune_exit_margin_px: 0,
+                        ..config
+                    };
+                    let pruned_without_exit = components.prune_unattached_predictions_scalar(
+                        &config,
+                        &carried,
+                        &mut no_exit.1,
+                        &mut no_exit.0,
+                        &mut no_exit.2,
+                    );
+                    some_leaving |= pruned_without_exit > slow;
+                }
+            }
+        }
+        assert!(some_pruned && some_kept && some_leaving);
+    }
+
+    #[test]
+    fn prediction_with_stamps_near_the_target_matches_stamping_every_source() {
+        let size = ImageSize::new(97, 71);
+        let mut state = 8642u64;
+        let mut next = |n: usize| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as usize % n
+        };
+        let mut predicted_total = 0;
+        for trial in 0..8 {
+            // Rectangles (some wider than a stamp segment, some small) with a band of Ñ on one
+            // side, scattered Ñ pixels, and a depth with steps so the gate matters.
+            let mut object = vec![0u8; size.area()];
+            let mut newly = Image::filled(size, 0u8);
+            for _ in 0..6 {
+                let (x0, y0) = (next(size.width - 10), next(size.height - 10));
+                let (w, h) = (2 + next(80), 2 + next(40));
+                let (x1, y1) = ((x0 + w).min(size.width - 1), (y0 + h).min(size.height - 1));
+                let band = 1 + next(6);
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        object[y * size.width + x] = 1;
+                    }
+                    for x in x1..(x1 + band).min(size.width) {
+                        newly.set(x, y, 1);
+                    }
+                }
+            }
+            for (o, n) in object.iter_mut().zip(newly.as_mut_slice()) {
+                if next(30) == 0 {
+                    *n = 1;
+                }
+                if *n != 0 {
+                    *o = 0;
+                }
+            }
+            let depth = DepthMeters::from_vec(
+                size,
+                (0..size.area())
+                    .map(|i| 1.0 + 0.01 * (i % size.width) as f32 + if next(12) == 0 { 0.3 } else { 0.0 })
+                    .collect(),
+            )
+            .unwrap();
+            let a = DepthMeters::from_vec(
+                size,
+                object
+                    .iter()
+                    .map(|&o| if o != 0 { 0.3 + 0.01 * next(10) as f32 } else { 0.0 })
+                    .collect(),
+            )
+            .unwrap();
+            let rows: Vec<usize> = (0..size.height)
+                .filter(|&y| object[y * size.width..(y + 1) * size.width].contains(&1))
+                .collect();
+            let columns: Vec<usize> = (0..size.width)
+                .filter(|&x| (0..size.height).any(|y| object[y * size.width + x] != 0))
+                .collect();
+            let bounds = PixelBounds {
+                x0: columns[0],
+                x1: *columns.last().unwrap(),
+                y0: rows[0],
+                y1: *rows.last().unwrap(),
+            };
+            let config = OcclusionConfig {
+                thin_structure_border_margin_px: 4,
+                ..OcclusionConfig::default()
+            };
+            let run = |stamp_all_sources: bool| {
+                let mut components = Components::new(size);
+                components.stamp_all_sources = stamp_all_sources;
+                components.object_set.copy_from_slice(&object);
+                let mut a = a.clone();
+                let stats =
+                    components.suppress_and_predict(&config, 20, Some(bounds), &depth, &newly, &mut a);
+                // The target is left all 0 for the next frame.
+                assert!(components.target.iter().all(|&t| t == 0));
+                let bits: Vec<u32> = a.as_slice().iter().map(|v| v.to_bits()).collect();
+                let counts = (
+                    stats.thin_pixels_erased,
+                    stats.components,
+                    stats.small_components_erased,
+                    stats.predicted_pixels,
+                    stats.predicted_bounds,
+                );
+                (counts, bits)
+            };
+            let (fast, reference) = (run(false), run(true));
+            assert_eq!(fast.0, reference.0, "trial {trial}");
+            assert!(fast.1 == reference.1, "trial {trial}");
+            predicted_total += reference.0 .3;
+        }
+        assert!(predicted_total > 500, "{predicted_total}");
     }
 
     #[test]
@@ -757,12 +1085,10 @@ mod tests {
         for (radius, margin) in [(1, 0), (1, 12), (2, 3)] {
             let run = |bounds: PixelBounds| {
                 let mut components = Components::new(size);
-                for (l, &v) in components.labels.iter_mut().zip(&set) {
-                    *l = if v != 0 { UNLABELLED } else { 0 };
-                }
+                components.object_set.copy_from_slice(&set);
                 let mut a = DepthMeters::filled(size, 1.0);
                 let erased = components.erase_thin_structures(radius, margin, bounds, &mut a);
-                (erased, components.labels, a.into_vec())
+                (erased, components.object_set, a.into_vec())
             };
             let (fast, slow) = (run(bounding), run(whole));
             assert!(slow.0 > 0, "radius {radius}");
@@ -784,9 +1110,9 @@ mod tests {
             .collect();
         for r in 0..4 {
             for erode in [true, false] {
-                let mut fast = image.clone();
-                let mut scratch = vec![0; image.len()];
-                square_filter(&mut fast, &mut scratch, width, height, r, erode);
+                let mut fast = vec![7; image.len()];
+                let mut scratch = vec![7; image.len()];
+                square_filter(&image, width, &mut scratch, &mut fast, width, height, r, erode);
                 assert_eq!(
                     fast,
                     square_filter_scalar(&image, width, height, r, erode),

@@ -36,6 +36,7 @@
 mod components;
 pub mod consistency;
 mod growth;
+mod runs;
 pub mod transport;
 
 use std::time::Instant;
@@ -502,7 +503,7 @@ impl OcclusionDetector {
             predicted_carried: &mut self.predicted_carried,
             delta_z_m: &mut self.delta_z_m,
             newly_discovered: &mut self.newly_discovered,
-            object_labels: self.components.labels_mut(),
+            object_set: self.components.object_set_mut(),
         };
         let (reference_transport, transport_scratch) =
             (self.reference_transport, &mut self.transport_scratch);
@@ -558,21 +559,25 @@ impl OcclusionDetector {
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
-        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3) and the
-        // pruning's label input. Pruning only removes pixels of P ⊆ O, so the mask size is
-        // |O| − pruned, and pruning is skipped when P is empty. The pass writes every pixel of
-        // the mask: the previous frame's final mask is first handed to the growth (a buffer
-        // swap, no copy).
+        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3, the
+        // pruning's input). Pruning only removes pixels of P ⊆ O, so the mask size is
+        // |O| − pruned, and pruning is skipped when P is empty.
+        // O ⊆ O₀ ∪ predicted pixels: the transport zeroed A outside O₀ (A ≤ τ_α there, and the
+        // same τ_α test decides O₀ and O), the labelling only zeroes A and the prediction only
+        // writes the pixels it fills. So O lies in the union of their bounding boxes.
+        let active = PixelBounds::union(counts.object_bounds, label_stats.predicted_bounds);
+        // The pass writes every pixel of the mask (0 outside `active`): the previous frame's
+        // final mask is first handed to the growth (a buffer swap, no copy).
         self.growth.keep_mask(&mut self.mask);
         let objects = object_mask(
             &self.config,
+            active,
             &self.accumulation_m,
             &self.compensated_m,
             &self.predicted_carried,
             &self.newly_discovered,
             &mut self.mask,
             &mut self.predicted,
-            self.components.labels_mut(),
         );
         let object_pixels = objects.object;
         if let Some(bounds) = objects.predicted_bounds {
@@ -677,19 +682,20 @@ struct ObjectCounts {
     predicted_bounds: Option<PixelBounds>,
 }
 
-/// Steps 11–12 input, row-parallel: O = {A > τ_α} into `mask`, P = (P̂ ∨ Ñ) ∧ O into
-/// `predicted` (all 0 when prediction is off), and `labels` = [`transport::UNLABELLED`] on P,
-/// 0 elsewhere.
+/// Steps 11–12 input, row-parallel: O = {A > τ_α} into `mask` and P = (P̂ ∨ Ñ) ∧ O into
+/// `predicted` (all 0 when prediction is off). `active` must hold every pixel of O (None: O is
+/// empty); outside it both are written 0 without reading A (on dominant-object frames the
+/// object box is a third of the image, and this pass is bound by memory bandwidth).
 #[allow(clippy::too_many_arguments)]
 fn object_mask(
     config: &OcclusionConfig,
+    active: Option<PixelBounds>,
     accumulation_m: &DepthMeters,
     compensated_m: &DepthMeters,
     predicted_carried: &Image<u8>,
     newly_discovered: &Image<u8>,
     mask: &mut Mask,
     predicted: &mut Image<u8>,
-    labels: &mut [u32],
 ) -> ObjectCounts {
     let width = mask.width();
     let chunk = transport::ROWS_PER_TASK * width;
@@ -702,33 +708,44 @@ fn object_mask(
     mask.as_mut_slice()
         .par_chunks_mut(chunk)
         .zip(predicted.as_mut_slice().par_chunks_mut(chunk))
-        .zip(labels[..accumulation_m.size().area()].par_chunks_mut(chunk))
         .enumerate()
-        .map(|(task, ((m_rows, p_rows), label_rows))| {
+        .map(|(task, (m_rows, p_rows))| {
             let mut counts = ObjectCounts::default();
-            let start = task * chunk;
-            let end = start + m_rows.len();
-            let (object_count, predicted_count) = transport::object_mask_block_with(
-                simd,
-                &parameters,
-                &accumulation_m.as_slice()[start..end],
-                &compensated_m.as_slice()[start..end],
-                &predicted_carried.as_slice()[start..end],
-                &newly_discovered.as_slice()[start..end],
-                m_rows,
-                p_rows,
-                label_rows,
-            );
-            counts.object = object_count as usize;
-            if predicted_count > 0 {
-                let y0 = start / width;
-                let y1 = end / width - 1;
-                counts.predicted_bounds = Some(PixelBounds {
-                    x0: 0,
-                    x1: width - 1,
-                    y0,
-                    y1,
-                });
+            let rows = m_rows.chunks_exact_mut(width).zip(p_rows.chunks_exact_mut(width));
+            for (row, (m_row, p_row)) in rows.enumerate() {
+                let y = task * transport::ROWS_PER_TASK + row;
+                let columns = match active {
+                    Some(b) if (b.y0..=b.y1).contains(&y) => b.x0..b.x1 + 1,
+                    _ => 0..0,
+                };
+                for row in [&mut *m_row, &mut *p_row] {
+                    row[..columns.start].fill(0);
+                    row[columns.end..].fill(0);
+                }
+                if columns.is_empty() {
+                    continue;
+                }
+                let pixels = y * width + columns.start..y * width + columns.end;
+                let (object_count, predicted_count) = transport::object_mask_block_with(
+                    simd,
+                    &parameters,
+                    &accumulation_m.as_slice()[pixels.clone()],
+                    &compensated_m.as_slice()[pixels.clone()],
+                    &predicted_carried.as_slice()[pixels.clone()],
+                    &newly_discovered.as_slice()[pixels],
+                    &mut m_row[columns.clone()],
+                    &mut p_row[columns],
+                );
+                counts.object += object_count as usize;
+                if predicted_count > 0 {
+                    let row_bounds = PixelBounds {
+                        x0: 0,
+                        x1: width - 1,
+                        y0: y,
+                        y1: y,
+                    };
+                    counts.predicted_bounds = PixelBounds::union(counts.predicted_bounds, Some(row_bounds));
+                }
             }
             counts
         })

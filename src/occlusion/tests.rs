@@ -2,7 +2,6 @@ use nalgebra::{Isometry3, Vector3};
 
 use super::transport::{
     transport, transport_scalar, transport_with, Simd, TransportInputs, TransportOutputs, TransportScratch,
-    UNLABELLED,
 };
 use super::*;
 use crate::image_buf::MASK_SET;
@@ -73,7 +72,7 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             Image::filled(size, 0u8),
             Image::filled(size, 0.0f32),
             Image::filled(size, 0u8),
-            vec![7u32; size.area()],
+            vec![7u8; size.area()],
         )
     };
     let (mut zc1, mut a1, mut p1, mut dz1, mut n1, mut l1) = blank();
@@ -88,7 +87,7 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             predicted_carried: &mut p1,
             delta_z_m: &mut dz1,
             newly_discovered: &mut n1,
-            object_labels: &mut l1,
+            object_set: &mut l1,
         },
     );
     // The AVX2 build (when the CPU has it) and the baseline build agree bit for bit.
@@ -103,7 +102,7 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             predicted_carried: &mut p3,
             delta_z_m: &mut dz3,
             newly_discovered: &mut n3,
-            object_labels: &mut l3,
+            object_set: &mut l3,
         },
     );
     let bits = |img: &DepthMeters| img.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
@@ -122,7 +121,7 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             predicted_carried: &mut p2,
             delta_z_m: &mut dz2,
             newly_discovered: &mut n2,
-            object_labels: &mut l2,
+            object_set: &mut l2,
         },
     );
     assert!(fast.warped > size.area() / 2);
@@ -619,7 +618,7 @@ fn object_mask_builds_match_the_definition() {
             predicting,
         };
         let run = |simd: Simd| {
-            let (mut mask, mut predicted, mut labels) = (vec![9u8; len], vec![9u8; len], vec![9u32; len]);
+            let (mut mask, mut predicted) = (vec![9u8; len], vec![9u8; len]);
             let counts = transport::object_mask_block_with(
                 simd,
                 &parameters,
@@ -629,9 +628,8 @@ fn object_mask_builds_match_the_definition() {
                 &newly,
                 &mut mask,
                 &mut predicted,
-                &mut labels,
             );
-            (counts, mask, predicted, labels)
+            (counts, mask, predicted)
         };
         let object: Vec<bool> = (0..len)
             .map(|i| a[i] > config.threshold(config.alpha, z[i]))
@@ -649,10 +647,6 @@ fn object_mask_builds_match_the_definition() {
                 .map(|&o| if o { MASK_SET } else { 0 })
                 .collect::<Vec<u8>>(),
             is_predicted.iter().map(|&p| u8::from(p)).collect::<Vec<u8>>(),
-            is_predicted
-                .iter()
-                .map(|&p| if p { UNLABELLED } else { 0 })
-                .collect::<Vec<u32>>(),
         );
         assert!(
             expected.0 .0 > 100 && (expected.0 .1 > 20 || !predicting),
@@ -662,4 +656,46 @@ fn object_mask_builds_match_the_definition() {
         assert_eq!(run(Simd::Baseline), expected, "{threshold_form:?} {predicting}");
         assert_eq!(run(Simd::Avx2), expected, "{threshold_form:?} {predicting}");
     }
+}
+
+#[test]
+fn the_mask_is_exactly_the_thresholded_accumulation_after_every_update() {
+    // The object-mask pass only evaluates A > τ_α inside the box of O₀ and the predicted
+    // pixels; that must lose nothing: without growth, O = {A > τ_α} on the whole image after
+    // every update (pruned pixels have A = 0), and P ⊆ O.
+    let sequence_config = SequenceConfig {
+        size: ImageSize::new(160, 120),
+        ..SequenceConfig::default()
+    };
+    let (mut predicted_frames, mut object_frames) = (0, 0);
+    for scenario in [Scenario::DominantObject, Scenario::EnteringWhilePanning] {
+        let sequence = SyntheticSequence::new(scenario, sequence_config);
+        let config = OcclusionConfig {
+            appearance_growth: None,
+            ..OcclusionConfig::default()
+        };
+        let mut detector =
+            OcclusionDetector::new(sequence_config.size, sequence_config.intrinsics(), config).unwrap();
+        for i in 0..sequence.len() {
+            let frame = sequence.frame(i);
+            detector
+                .update(&frame.depth_m, &sequence.current_from_previous(i))
+                .unwrap();
+            let (a, zc) = (
+                detector.accumulation_m().as_slice(),
+                detector.compensated_depth_m().as_slice(),
+            );
+            for (p, &m) in detector.mask().as_slice().iter().enumerate() {
+                let object = a[p] > config.threshold(config.alpha, zc[p]);
+                assert_eq!(m != 0, object, "{scenario:?} frame {i} pixel {p}");
+                assert!(detector.predicted_area().as_slice()[p] == 0 || object);
+            }
+            predicted_frames += usize::from(detector.stats().predicted_pixels > 0);
+            object_frames += usize::from(detector.stats().mask_pixels > 0);
+        }
+    }
+    assert!(
+        predicted_frames > 10 && object_frames > 100,
+        "{predicted_frames} {object_frames}"
+    );
 }

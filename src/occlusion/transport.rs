@@ -24,9 +24,6 @@ use crate::image_buf::{DepthMeters, Image};
 /// overhead while 30 tasks per frame still balance two to eight cores.
 pub const ROWS_PER_TASK: usize = 16;
 
-/// Label value of an object pixel not yet assigned to a component (the labelling's input).
-pub const UNLABELLED: u32 = u32::MAX;
-
 /// 2^23: the smallest f32 whose ulp is 1 (see `warp_row`'s rounding).
 const ROUND_MAGIC: f32 = 8_388_608.0;
 
@@ -189,8 +186,8 @@ pub struct TransportOutputs<'a> {
     pub delta_z_m: &'a mut DepthMeters,
     /// Ñ (0 / 1).
     pub newly_discovered: &'a mut Image<u8>,
-    /// [`UNLABELLED`] where A > τ_α (the object set O₀), else 0; one entry per pixel.
-    pub object_labels: &'a mut [u32],
+    /// 1 where A > τ_α (the object set O₀), else 0; one entry per pixel.
+    pub object_set: &'a mut [u8],
 }
 
 /// Pixel counts of one transport.
@@ -286,11 +283,11 @@ pub fn transport_with(
         .zip(outputs.predicted_carried.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.delta_z_m.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.newly_discovered.as_mut_slice().par_chunks_mut(chunk))
-        .zip(outputs.object_labels[..area].par_chunks_mut(chunk))
+        .zip(outputs.object_set[..area].par_chunks_mut(chunk))
         .zip(scratch.sources.par_chunks_mut(chunk))
         .enumerate()
         .map(
-            |(task, ((((((zc_rows, a_rows), p_rows), dz_rows), n_rows), label_rows), source_rows))| {
+            |(task, ((((((zc_rows, a_rows), p_rows), dz_rows), n_rows), set_rows), source_rows))| {
                 let mut counts = TransportCounts::default();
                 let rows = zc_rows
                     .chunks_exact_mut(width)
@@ -298,9 +295,9 @@ pub fn transport_with(
                     .zip(p_rows.chunks_exact_mut(width))
                     .zip(dz_rows.chunks_exact_mut(width))
                     .zip(n_rows.chunks_exact_mut(width))
-                    .zip(label_rows.chunks_exact_mut(width))
+                    .zip(set_rows.chunks_exact_mut(width))
                     .zip(source_rows.chunks_exact_mut(width));
-                for (row, ((((((zc_row, a_row), p_row), dz_row), n_row), label_row), source_row)) in
+                for (row, ((((((zc_row, a_row), p_row), dz_row), n_row), set_row), source_row)) in
                     rows.enumerate()
                 {
                     let y = task * ROWS_PER_TASK + row;
@@ -336,7 +333,7 @@ pub fn transport_with(
                             predicted_carried: p_row,
                             delta_z_m: dz_row,
                             newly_discovered: n_row,
-                            object_labels: label_row,
+                            object_set: set_row,
                         },
                     );
                     counts.warped += row_counts.warped;
@@ -456,7 +453,7 @@ struct FinishRow<'a> {
     /// z′ on entry (geometric mode), ΔZ on return.
     delta_z_m: &'a mut [f32],
     newly_discovered: &'a mut [u8],
-    object_labels: &'a mut [u32],
+    object_set: &'a mut [u8],
 }
 
 /// Counts of one row.
@@ -517,8 +514,8 @@ fn finish_row(
         let p_row = &mut out.predicted_carried[start..end];
         let dz_row = &mut out.delta_z_m[start..end];
         let n_row = &mut out.newly_discovered[start..end];
-        let label_row = &mut out.object_labels[start..end];
-        // Three single-width loops (f32; f32 → u32; to u8) so each one vectorises.
+        let set_row = &mut out.object_set[start..end];
+        // Three single-width loops (f32; f32 → u8; to u8) so each one vectorises.
         let warped_count = finish_block(
             simd,
             finish,
@@ -529,7 +526,7 @@ fn finish_row(
             a_row,
             dz_row,
         );
-        let object_count = object_labels_block(simd, finish, zc_row, a_row, label_row);
+        let object_count = object_set_block(simd, finish, zc_row, a_row, set_row);
         let newly_count = flags_block(
             simd,
             sources,
@@ -543,8 +540,8 @@ fn finish_row(
         counts.newly_discovered += newly_count as usize;
         counts.object += object_count as usize;
         if object_count > 0 {
-            let first = label_row.iter().position(|&l| l != 0).unwrap_or(0);
-            let last = label_row.iter().rposition(|&l| l != 0).unwrap_or(0);
+            let first = set_row.iter().position(|&l| l != 0).unwrap_or(0);
+            let last = set_row.iter().rposition(|&l| l != 0).unwrap_or(0);
             counts.object_columns.0 = counts.object_columns.0.min(start + first);
             counts.object_columns.1 = start + last;
         }
@@ -649,13 +646,13 @@ simd_kernel!(
     )
 );
 
-/// O₀ labels of one block: [`UNLABELLED`] where A > τ_α. Returns the object pixels.
+/// O₀ of one block: 1 where A > τ_α, else 0. Returns the object pixels.
 #[inline(always)]
-fn object_labels_block_generic(
+fn object_set_block_generic(
     finish: &FinishParameters,
     zc_row: &[f32],
     a_row: &[f32],
-    labels: &mut [u32],
+    labels: &mut [u8],
 ) -> u32 {
     let len = labels.len();
     let (zc_row, a_row) = (&zc_row[..len], &a_row[..len]);
@@ -663,17 +660,17 @@ fn object_labels_block_generic(
     for i in 0..len {
         let z_or_one = if finish.quadratic { zc_row[i] } else { 1.0 };
         let object = a_row[i] > finish.alpha * zc_row[i] * z_or_one;
-        labels[i] = if object { UNLABELLED } else { 0 };
+        labels[i] = u8::from(object);
         object_count += u32::from(object);
     }
     object_count
 }
 
 simd_kernel!(
-    object_labels_block,
-    object_labels_block_avx2,
-    object_labels_block_generic,
-    (finish: &FinishParameters, zc_row: &[f32], a_row: &[f32], labels: &mut [u32]) -> u32
+    object_set_block,
+    object_set_block_avx2,
+    object_set_block_generic,
+    (finish: &FinishParameters, zc_row: &[f32], a_row: &[f32], labels: &mut [u8]) -> u32
 );
 
 /// Ñ and P̂ of one block (`sampled` already masked by validity). Returns |Ñ|.
@@ -725,9 +722,8 @@ pub(super) struct ObjectMaskParameters {
     pub predicting: bool,
 }
 
-/// Steps 11–12 input on a run of pixels: O = {A > τ_α} into `mask` (0 / `MASK_SET`), P = (P̂ ∨ Ñ)
-/// ∧ O into `predicted` (0 / 1) and the pruning's labels ([`UNLABELLED`] on P, 0 elsewhere).
-/// Returns (|O|, |P|). Single-width loops so each vectorises.
+/// Steps 11–12 input on a run of pixels: O = {A > τ_α} into `mask` (0 / `MASK_SET`) and P = (P̂ ∨ Ñ)
+/// ∧ O into `predicted` (0 / 1, the pruning labels its runs directly). Returns (|O|, |P|). Single-width loops so each vectorises.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn object_mask_block_generic(
@@ -738,7 +734,6 @@ fn object_mask_block_generic(
     newly: &[u8],
     mask: &mut [u8],
     predicted: &mut [u8],
-    labels: &mut [u32],
 ) -> (u32, u32) {
     let len = mask.len();
     let (a, z, carried, newly) = (
@@ -747,7 +742,7 @@ fn object_mask_block_generic(
         &carried[..len],
         &newly[..len],
     );
-    let (predicted, labels) = (&mut predicted[..len], &mut labels[..len]);
+    let predicted = &mut predicted[..len];
     let (quadratic, alpha) = (parameters.quadratic, parameters.alpha);
     let mut object_count = 0u32;
     for i in 0..len {
@@ -764,10 +759,6 @@ fn object_mask_block_generic(
         predicted[i] = u8::from(is_predicted);
         predicted_count += u32::from(is_predicted);
     }
-    for i in 0..len {
-        // P is 0 or 1: 0 − P is 0 or `UNLABELLED` (u32::MAX).
-        labels[i] = 0u32.wrapping_sub(u32::from(predicted[i]));
-    }
     (object_count, predicted_count)
 }
 
@@ -782,8 +773,7 @@ simd_kernel!(
         carried: &[u8],
         newly: &[u8],
         mask: &mut [u8],
-        predicted: &mut [u8],
-        labels: &mut [u32]
+        predicted: &mut [u8]
     ) -> (u32, u32)
 );
 
@@ -799,7 +789,6 @@ pub(super) fn object_mask_block_with(
     newly: &[u8],
     mask: &mut [u8],
     predicted: &mut [u8],
-    labels: &mut [u32],
 ) -> (u32, u32) {
     let simd = if simd == Simd::Avx2 {
         Simd::detect()
@@ -815,7 +804,6 @@ pub(super) fn object_mask_block_with(
         newly,
         mask,
         predicted,
-        labels,
     )
 }
 
@@ -883,11 +871,11 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<
         counts.newly_discovered += usize::from(newly);
     }
     // Step 10's input: the object set O₀ = {A > τ_α} and its bounding box.
-    for (i, label) in outputs.object_labels[..size.area()].iter_mut().enumerate() {
+    for (i, label) in outputs.object_set[..size.area()].iter_mut().enumerate() {
         let (x, y) = (i % width, i / width);
         let object = outputs.accumulation_m.get(x, y)
             > config.threshold(config.alpha, outputs.compensated_m.get(x, y));
-        *label = if object { UNLABELLED } else { 0 };
+        *label = u8::from(object);
         if object {
             counts.object += 1;
             let pixel = PixelBounds {
