@@ -49,6 +49,10 @@ pub(super) struct Components {
     target: Vec<u8>,
     /// The interior pixels of Ñ (where prediction may write), in row-major order.
     target_pixels: Vec<u32>,
+    /// Per row, the columns `[first, last + 1)` spanned by its target pixels at the start of
+    /// the labelling ((0, 0) when none): a superset of the row's target for the whole
+    /// labelling (the target only shrinks).
+    target_columns: Vec<(u32, u32)>,
     /// `source_stamp[u] == source_epoch` ⇔ u is in the current component's source set.
     source_stamp: Vec<u32>,
     source_epoch: u32,
@@ -67,11 +71,6 @@ pub(super) struct Components {
     /// test; the detector stamps only pixels next to the target).
     stamp_all_sources: bool,
 }
-
-/// Pixels per segment of a run for the prediction's source stamps: short enough to skip most of
-/// a large component's interior, long enough that the neighbourhood test (three scans of
-/// `STAMP_SEGMENT + 2` bytes) costs less than stamping the segment (4 bytes per pixel).
-const STAMP_SEGMENT: usize = 64;
 
 /// `values.iter().position(|&v| v != 0)`, skipping 32 zero bytes at a time as four u64 words
 /// (Ñ is sparse: most of its rows hold no pixel).
@@ -143,6 +142,7 @@ impl Components {
             object_set: vec![0; n],
             target: vec![0; n],
             target_pixels: Vec::with_capacity(n),
+            target_columns: vec![(0, 0); size.height],
             source_stamp: vec![0; n],
             source_epoch: 0,
             candidate_stamp: vec![0; n],
@@ -197,13 +197,21 @@ impl Components {
             } else {
                 0..0
             };
+            self.target_columns.fill((0, 0));
             for y in interior_rows {
                 let first = y * width + 1;
                 let interior = &newly_discovered.as_slice()[first..(y + 1) * width - 1];
+                let row_start = self.target_pixels.len();
                 let mut x = 0;
                 while let Some(offset) = position_nonzero_u8(&interior[x..]) {
                     self.target_pixels.push((first + x + offset) as u32);
                     x += offset + 1;
+                }
+                if let (Some(&first_pixel), Some(&last_pixel)) =
+                    (self.target_pixels.get(row_start), self.target_pixels.last())
+                {
+                    let row = (y * width) as u32;
+                    self.target_columns[y] = (first_pixel - row, last_pixel - row + 1);
                 }
             }
             for &t in &self.target_pixels {
@@ -319,26 +327,30 @@ impl Components {
         // The source set is only ever looked up at 4-neighbours of target pixels (candidates
         // are target pixels, and the first ring tests the neighbours of target pixels), and the
         // target only shrinks while a labelling runs: so only the component's pixels next to
-        // a current target pixel need a stamp. Stamped per segment of a run whose 3 × (len + 2)
-        // neighbourhood holds a target pixel (Ñ is a thin band; the components are large).
+        // a current target pixel need a stamp: the run's pixels within one column of the
+        // target span of its own row or a neighbouring row (Ñ is a thin band; the components
+        // are large), a superset found without a scan.
         for run in self.runs.runs(k) {
-            let (y, row) = (run.y as usize, run.y as usize * width);
-            let mut x = run.x0 as usize;
-            while x < run.x1 as usize {
-                let end = (x + STAMP_SEGMENT).min(run.x1 as usize);
-                let window = x.saturating_sub(1)..(end + 1).min(width);
-                let near_target = self.stamp_all_sources
-                    || [y.wrapping_sub(1), y, y + 1].into_iter().any(|ny| {
-                        ny < height
-                            && position_nonzero_u8(
-                                &self.target[ny * width + window.start..ny * width + window.end],
-                            )
-                            .is_some()
-                    });
-                if near_target {
-                    self.source_stamp[row + x..row + end].fill(epoch);
+            let (y, row, x0, x1) = (
+                run.y as usize,
+                run.y as usize * width,
+                run.x0 as usize,
+                run.x1 as usize,
+            );
+            if self.stamp_all_sources {
+                self.source_stamp[row + x0..row + x1].fill(epoch);
+                continue;
+            }
+            for ny in [y.wrapping_sub(1), y, y + 1] {
+                let Some(&(first, end)) = self.target_columns.get(ny) else {
+                    continue;
+                };
+                // Pixels within one column of the row's target span.
+                let start = (first as usize).saturating_sub(1).max(x0);
+                let stop = (end as usize + 1).min(x1);
+                if first < end && start < stop {
+                    self.source_stamp[row + start..row + stop].fill(epoch);
                 }
-                x = end;
             }
         }
         let z = depth_m.as_slice();
