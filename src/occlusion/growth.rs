@@ -254,7 +254,27 @@ struct Evidence<'a> {
     previous_mask: Option<&'a [u8]>,
 }
 
-impl Evidence<'_> {
+impl<'a> Evidence<'a> {
+    /// The evidence of the current frame (`depth_m`, `gray`) against the previous one (its gray
+    /// image, and its final mask when it belongs to the previous frame).
+    fn new(
+        growth: &'a AppearanceGrowthConfig,
+        warp: BackwardWarp<'a>,
+        (depth_m, gray): (&'a DepthMeters, &'a GrayF32),
+        (previous_gray, previous_mask): (&'a GrayF32, Option<&'a Mask>),
+    ) -> Self {
+        Self {
+            growth,
+            warp,
+            width: depth_m.width(),
+            height: depth_m.height(),
+            depth_m: depth_m.as_slice(),
+            current: gray.as_slice(),
+            previous: previous_gray.as_slice(),
+            previous_mask: previous_mask.map(Image::as_slice),
+        }
+    }
+
     /// Rule (b): pixel (x, y) changed appearance against the previous image at its warped
     /// position (bilinear) and against every previous pixel within the search radius.
     fn changed(&self, x: usize, y: usize) -> bool {
@@ -510,16 +530,15 @@ impl AppearanceGrowth {
             return counts;
         }
         fill_ray_tables(intrinsics, &mut self.ray_x, &mut self.ray_y);
-        let evidence = Evidence {
+        let evidence = Evidence::new(
             growth,
-            warp: BackwardWarp::new(intrinsics, previous_from_current, (&self.ray_x, &self.ray_y)),
-            width,
-            height,
-            depth_m: depth_m.as_slice(),
-            current: gray.as_slice(),
-            previous: self.previous_gray.as_slice(),
-            previous_mask: self.previous_mask_valid.then_some(self.previous_mask.as_slice()),
-        };
+            BackwardWarp::new(intrinsics, previous_from_current, (&self.ray_x, &self.ray_y)),
+            (depth_m, gray),
+            (
+                &self.previous_gray,
+                self.previous_mask_valid.then_some(&self.previous_mask),
+            ),
+        );
         let state = GrowthBuffers {
             looked_at: &mut self.looked_at,
             frontier: &mut self.frontier,
@@ -665,18 +684,15 @@ mod tests {
         }
         let (mut ray_x, mut ray_y) = (vec![0.0; width], vec![0.0; height]);
         fill_ray_tables(intrinsics, &mut ray_x, &mut ray_y);
-        let evidence = Evidence {
+        let evidence = Evidence::new(
             growth,
-            warp: BackwardWarp::new(intrinsics, previous_from_current, (&ray_x, &ray_y)),
-            width,
-            height,
-            depth_m: depth_m.as_slice(),
-            current: gray.as_slice(),
-            previous: state.previous_gray.as_slice(),
-            previous_mask: state
-                .previous_mask_valid
-                .then_some(state.previous_mask.as_slice()),
-        };
+            BackwardWarp::new(intrinsics, previous_from_current, (&ray_x, &ray_y)),
+            (depth_m, gray),
+            (
+                &state.previous_gray,
+                state.previous_mask_valid.then_some(&state.previous_mask),
+            ),
+        );
         let interior =
             |x: isize, y: isize| x >= 1 && y >= 1 && x < width as isize - 1 && y < height as isize - 1;
         let set = |mask: &Mask, x: isize, y: isize| mask.get(x as usize, y as usize) != 0;
