@@ -127,13 +127,12 @@ pub(super) struct AppearanceGrowth {
     height: usize,
     /// Gray image of the detector's previous frame.
     previous_gray: GrayF32,
-    /// `previous_gray` belongs to the detector's previous frame.
+    /// `previous_gray` and `previous_mask` belong to the detector's previous frame (false after
+    /// a reset or a frame without gray).
     previous_valid: bool,
     /// Final mask of the detector's previous frame (after growth), handed over by
     /// [`AppearanceGrowth::keep_mask`].
     previous_mask: Mask,
-    /// `previous_mask` belongs to the previous frame (false after a reset or without gray).
-    previous_mask_valid: bool,
     /// This frame's gray image, copied while the growth runs; [`AppearanceGrowth::remember`]
     /// swaps it in instead of copying.
     staged_gray: GrayF32,
@@ -250,18 +249,18 @@ struct Evidence<'a> {
     depth_m: &'a [f32],
     current: &'a [f32],
     previous: &'a [f32],
-    /// The previous frame's final mask; None when it does not belong to the previous frame.
-    previous_mask: Option<&'a [u8]>,
+    /// The previous frame's final mask.
+    previous_mask: &'a [u8],
 }
 
 impl<'a> Evidence<'a> {
     /// The evidence of the current frame (`depth_m`, `gray`) against the previous one (its gray
-    /// image, and its final mask when it belongs to the previous frame).
+    /// image and final mask).
     fn new(
         growth: &'a AppearanceGrowthConfig,
         warp: BackwardWarp<'a>,
         (depth_m, gray): (&'a DepthMeters, &'a GrayF32),
-        (previous_gray, previous_mask): (&'a GrayF32, Option<&'a Mask>),
+        (previous_gray, previous_mask): (&'a GrayF32, &'a Mask),
     ) -> Self {
         Self {
             growth,
@@ -271,7 +270,7 @@ impl<'a> Evidence<'a> {
             depth_m: depth_m.as_slice(),
             current: gray.as_slice(),
             previous: previous_gray.as_slice(),
-            previous_mask: previous_mask.map(Image::as_slice),
+            previous_mask: previous_mask.as_slice(),
         }
     }
 
@@ -332,9 +331,6 @@ impl<'a> Evidence<'a> {
         if !self.growth.persistent_seeds_only {
             return true;
         }
-        let Some(previous_mask) = self.previous_mask else {
-            return false;
-        };
         let z_m = self.depth_m[y * self.width + x];
         if z_m <= 0.0 {
             return false;
@@ -347,7 +343,7 @@ impl<'a> Evidence<'a> {
             && v >= 0.0
             && (u as usize) < self.width
             && (v as usize) < self.height
-            && previous_mask[v as usize * self.width + u as usize] != 0
+            && self.previous_mask[v as usize * self.width + u as usize] != 0
     }
 
     /// The accumulation a pixel of depth `zn_m` grown from `zf_m` (accumulation `af_m`) gets.
@@ -450,7 +446,6 @@ impl AppearanceGrowth {
             previous_gray: Image::filled(size, 0.0),
             previous_valid: false,
             previous_mask: Image::filled(size, 0),
-            previous_mask_valid: false,
             staged_gray: Image::filled(size, 0.0),
             staged: false,
             looked_at: Vec::with_capacity(size.area()),
@@ -473,7 +468,6 @@ impl AppearanceGrowth {
     /// Forgets the previous image (the next frame has nothing to compare with).
     pub(super) fn invalidate(&mut self) {
         self.previous_valid = false;
-        self.previous_mask_valid = false;
         self.staged = false;
     }
 
@@ -489,7 +483,6 @@ impl AppearanceGrowth {
                     self.previous_gray.as_mut_slice().copy_from_slice(g.as_slice());
                 }
                 self.previous_valid = true;
-                self.previous_mask_valid = true;
             }
             _ => self.invalidate(),
         }
@@ -534,10 +527,7 @@ impl AppearanceGrowth {
             growth,
             BackwardWarp::new(intrinsics, previous_from_current, (&self.ray_x, &self.ray_y)),
             (depth_m, gray),
-            (
-                &self.previous_gray,
-                self.previous_mask_valid.then_some(&self.previous_mask),
-            ),
+            (&self.previous_gray, &self.previous_mask),
         );
         let state = GrowthBuffers {
             looked_at: &mut self.looked_at,
@@ -688,10 +678,7 @@ mod tests {
             growth,
             BackwardWarp::new(intrinsics, previous_from_current, (&ray_x, &ray_y)),
             (depth_m, gray),
-            (
-                &state.previous_gray,
-                state.previous_mask_valid.then_some(&state.previous_mask),
-            ),
+            (&state.previous_gray, &state.previous_mask),
         );
         let interior =
             |x: isize, y: isize| x >= 1 && y >= 1 && x < width as isize - 1 && y < height as isize - 1;
