@@ -164,6 +164,18 @@ struct SeedBand {
     boundary_row: Vec<u8>,
 }
 
+/// One frame's inputs to the growth: its parameters, the camera, the motion since the previous
+/// frame, and the current depth and gray image.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct GrowthFrame<'a> {
+    pub growth: &'a AppearanceGrowthConfig,
+    pub config: &'a OcclusionConfig,
+    pub intrinsics: &'a PinholeIntrinsics,
+    pub previous_from_current: &'a Isometry3<f64>,
+    pub depth_m: &'a DepthMeters,
+    pub gray: &'a GrayF32,
+}
+
 /// What one growth pass did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub(super) struct GrowthCounts {
@@ -254,17 +266,17 @@ struct Evidence<'a> {
 }
 
 impl<'a> Evidence<'a> {
-    /// The evidence of the current frame (`depth_m`, `gray`) against the previous one (its gray
-    /// image and final mask).
+    /// The evidence of the current frame against the previous one (its gray image and final
+    /// mask); `rays` filled by [`fill_ray_tables`].
     fn new(
-        growth: &'a AppearanceGrowthConfig,
-        warp: BackwardWarp<'a>,
-        (depth_m, gray): (&'a DepthMeters, &'a GrayF32),
+        frame: &GrowthFrame<'a>,
+        rays: (&'a [f32], &'a [f32]),
         (previous_gray, previous_mask): (&'a GrayF32, &'a Mask),
     ) -> Self {
+        let GrowthFrame { depth_m, gray, .. } = *frame;
         Self {
-            growth,
-            warp,
+            growth: frame.growth,
+            warp: BackwardWarp::new(frame.intrinsics, frame.previous_from_current, rays),
             width: depth_m.width(),
             height: depth_m.height(),
             depth_m: depth_m.as_slice(),
@@ -501,19 +513,14 @@ impl AppearanceGrowth {
     /// number of set pixels of `mask` (nothing happens when 0). Copies `gray` aside while it
     /// works, for [`AppearanceGrowth::remember`] to keep without a copy: call `remember` with
     /// the same `gray` next.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn grow(
         &mut self,
-        growth: &AppearanceGrowthConfig,
-        config: &OcclusionConfig,
-        intrinsics: &PinholeIntrinsics,
-        previous_from_current: &Isometry3<f64>,
-        depth_m: &DepthMeters,
-        gray: &GrayF32,
+        frame: &GrowthFrame,
         mask: &mut Mask,
         accumulation_m: &mut DepthMeters,
         mask_pixels: usize,
     ) -> GrowthCounts {
+        let growth = frame.growth;
         let mut counts = GrowthCounts::default();
         if !self.previous_valid || mask_pixels == 0 || growth.max_rings == 0 {
             return counts;
@@ -522,11 +529,10 @@ impl AppearanceGrowth {
         if width < 3 || height < 3 {
             return counts;
         }
-        fill_ray_tables(intrinsics, &mut self.ray_x, &mut self.ray_y);
+        fill_ray_tables(frame.intrinsics, &mut self.ray_x, &mut self.ray_y);
         let evidence = Evidence::new(
-            growth,
-            BackwardWarp::new(intrinsics, previous_from_current, (&self.ray_x, &self.ray_y)),
-            (depth_m, gray),
+            frame,
+            (&self.ray_x, &self.ray_y),
             (&self.previous_gray, &self.previous_mask),
         );
         let state = GrowthBuffers {
@@ -539,11 +545,11 @@ impl AppearanceGrowth {
         // are memory-bound, and the growth is mostly sequential.
         let staged_gray = self.staged_gray.as_mut_slice();
         let ((), grown) = rayon::join(
-            || staged_gray.copy_from_slice(gray.as_slice()),
+            || staged_gray.copy_from_slice(frame.gray.as_slice()),
             || {
                 state.grow(
                     &evidence,
-                    config,
+                    frame.config,
                     mask.as_mut_slice(),
                     accumulation_m.as_mut_slice(),
                 )
@@ -656,28 +662,22 @@ mod tests {
     /// The growth written plainly (the reference of [`AppearanceGrowth::grow`]): seeds by
     /// testing each mask pixel's 8 neighbours, breadth-first rings with bounds checks and a
     /// separate "decided" image; same rules, same order.
-    #[allow(clippy::too_many_arguments)]
     fn grow_reference(
         state: &AppearanceGrowth,
-        growth: &AppearanceGrowthConfig,
-        config: &OcclusionConfig,
-        intrinsics: &PinholeIntrinsics,
-        previous_from_current: &Isometry3<f64>,
-        depth_m: &DepthMeters,
-        gray: &GrayF32,
+        frame: &GrowthFrame,
         mask: &mut Mask,
         accumulation_m: &mut DepthMeters,
     ) -> usize {
+        let growth = frame.growth;
         let (width, height) = (state.width, state.height);
         if !state.previous_valid || growth.max_rings == 0 {
             return 0;
         }
         let (mut ray_x, mut ray_y) = (vec![0.0; width], vec![0.0; height]);
-        fill_ray_tables(intrinsics, &mut ray_x, &mut ray_y);
+        fill_ray_tables(frame.intrinsics, &mut ray_x, &mut ray_y);
         let evidence = Evidence::new(
-            growth,
-            BackwardWarp::new(intrinsics, previous_from_current, (&ray_x, &ray_y)),
-            (depth_m, gray),
+            frame,
+            (&ray_x, &ray_y),
             (&state.previous_gray, &state.previous_mask),
         );
         let interior =
@@ -699,7 +699,7 @@ mod tests {
         for _ in 0..growth.max_rings {
             let mut next = Vec::new();
             for &(fx, fy) in &frontier {
-                let zf = depth_m.get(fx, fy);
+                let zf = frame.depth_m.get(fx, fy);
                 if zf <= 0.0 {
                     continue;
                 }
@@ -709,7 +709,7 @@ mod tests {
                         continue;
                     }
                     let (nx, ny) = (nx as usize, ny as usize);
-                    let zn = depth_m.get(nx, ny);
+                    let zn = frame.depth_m.get(nx, ny);
                     if zn <= 0.0 || (zn - zf).abs() > growth.depth_tolerance * zf {
                         continue;
                     }
@@ -717,7 +717,7 @@ mod tests {
                     if evidence.changed(nx, ny) {
                         mask.set(nx, ny, MASK_SET);
                         let af = accumulation_m.get(fx, fy);
-                        accumulation_m.set(nx, ny, evidence.grown_accumulation(config, af, zf, zn));
+                        accumulation_m.set(nx, ny, evidence.grown_accumulation(frame.config, af, zf, zn));
                         next.push((nx, ny));
                     }
                 }
@@ -793,12 +793,14 @@ mod tests {
         // The strip was already detected in the previous frame (the growth's seeds).
         remember_frame(&mut state, previous, &mask);
         let counts = state.grow(
-            &growth,
-            &config,
-            &intrinsics(),
-            &Isometry3::identity(),
-            &depth(),
-            current,
+            &GrowthFrame {
+                growth: &growth,
+                config: &config,
+                intrinsics: &intrinsics(),
+                previous_from_current: &Isometry3::identity(),
+                depth_m: &depth(),
+                gray: current,
+            },
             &mut mask,
             &mut accumulation,
             mask_pixels,
@@ -946,12 +948,14 @@ mod tests {
                 let mask_pixels = scene.mask.as_slice().iter().filter(|&&m| m != 0).count();
                 let (mut mask, mut accumulation) = (scene.mask.clone(), scene.accumulation.clone());
                 let counts = state.grow(
-                    growth,
-                    &config,
-                    &intrinsics,
-                    &scene.motion,
-                    &scene.depth,
-                    &scene.gray,
+                    &GrowthFrame {
+                        growth,
+                        config: &config,
+                        intrinsics: &intrinsics,
+                        previous_from_current: &scene.motion,
+                        depth_m: &scene.depth,
+                        gray: &scene.gray,
+                    },
                     &mut mask,
                     &mut accumulation,
                     mask_pixels,
@@ -960,12 +964,14 @@ mod tests {
                     (scene.mask.clone(), scene.accumulation.clone());
                 let expected_grown = grow_reference(
                     &state,
-                    growth,
-                    &config,
-                    &intrinsics,
-                    &scene.motion,
-                    &scene.depth,
-                    &scene.gray,
+                    &GrowthFrame {
+                        growth,
+                        config: &config,
+                        intrinsics: &intrinsics,
+                        previous_from_current: &scene.motion,
+                        depth_m: &scene.depth,
+                        gray: &scene.gray,
+                    },
                     &mut expected_mask,
                     &mut expected_accumulation,
                 );
@@ -991,12 +997,14 @@ mod tests {
         assert!(state.previous_gray == previous, "copied without a growth");
         let (mut mask, mut accumulation) = (seeds.clone(), Image::filled(SIZE, 1.0f32));
         let counts = state.grow(
-            &unbounded(),
-            &OcclusionConfig::default(),
-            &intrinsics(),
-            &Isometry3::identity(),
-            &depth(),
-            &current,
+            &GrowthFrame {
+                growth: &unbounded(),
+                config: &OcclusionConfig::default(),
+                intrinsics: &intrinsics(),
+                previous_from_current: &Isometry3::identity(),
+                depth_m: &depth(),
+                gray: &current,
+            },
             &mut mask,
             &mut accumulation,
             360,
@@ -1060,12 +1068,14 @@ mod tests {
             remember_frame(&mut state, &previous, &Image::filled(SIZE, 0));
             state
                 .grow(
-                    &growth,
-                    &OcclusionConfig::default(),
-                    &intrinsics(),
-                    &Isometry3::identity(),
-                    &depth(),
-                    &current,
+                    &GrowthFrame {
+                        growth: &growth,
+                        config: &OcclusionConfig::default(),
+                        intrinsics: &intrinsics(),
+                        previous_from_current: &Isometry3::identity(),
+                        depth_m: &depth(),
+                        gray: &current,
+                    },
                     &mut mask,
                     &mut accumulation,
                     SEED_X.len() * BOX_Y.len(),
@@ -1135,12 +1145,14 @@ mod tests {
             let mut state = AppearanceGrowth::new(SIZE);
             remember_frame(&mut state, &previous, &mask);
             let counts = state.grow(
-                &growth,
-                &config,
-                &intrinsics(),
-                &Isometry3::identity(),
-                &slanted,
-                &current,
+                &GrowthFrame {
+                    growth: &growth,
+                    config: &config,
+                    intrinsics: &intrinsics(),
+                    previous_from_current: &Isometry3::identity(),
+                    depth_m: &slanted,
+                    gray: &current,
+                },
                 &mut mask,
                 &mut accumulation,
                 SEED_X.len() * BOX_Y.len(),
@@ -1207,12 +1219,14 @@ mod tests {
         let run = |state: &mut AppearanceGrowth, mask: &mut Mask, accumulation: &mut DepthMeters, pixels| {
             state
                 .grow(
-                    &unbounded(),
-                    &config,
-                    &intrinsics(),
-                    &Isometry3::identity(),
-                    &depth(),
-                    &current,
+                    &GrowthFrame {
+                        growth: &unbounded(),
+                        config: &config,
+                        intrinsics: &intrinsics(),
+                        previous_from_current: &Isometry3::identity(),
+                        depth_m: &depth(),
+                        gray: &current,
+                    },
                     mask,
                     accumulation,
                     pixels,

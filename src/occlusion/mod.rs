@@ -50,8 +50,8 @@ use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
 use rayon::prelude::*;
 
 use components::Components;
-use growth::AppearanceGrowth;
 pub use growth::AppearanceGrowthConfig;
+use growth::{AppearanceGrowth, GrowthFrame};
 use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch};
 
 /// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
@@ -600,12 +600,14 @@ impl OcclusionDetector {
         if let (Some(growth), Some(gray)) = (&self.config.appearance_growth, gray) {
             let started = Instant::now();
             let counts = self.growth.grow(
-                growth,
-                &self.config,
-                &self.intrinsics,
-                &previous_from_current,
-                depth_m,
-                gray,
+                &GrowthFrame {
+                    growth,
+                    config: &self.config,
+                    intrinsics: &self.intrinsics,
+                    previous_from_current: &previous_from_current,
+                    depth_m,
+                    gray,
+                },
                 &mut self.mask,
                 &mut self.accumulation_m,
                 self.stats.mask_pixels,
