@@ -140,8 +140,10 @@ impl PixelRays {
 pub struct TransportScratch {
     /// R·ray_x per column, one vector per component of the rotated ray (per frame).
     column_terms: [Vec<f32>; 3],
-    /// Warp source (pixel index into the previous frame, or `NO_SOURCE`) per pixel.
-    sources: Vec<u32>,
+    /// Warp sources (pixel index into the previous frame, or `NO_SOURCE`) of one row per
+    /// parallel task: each task reuses its row, which stays in L1 (a whole-image buffer would
+    /// cost 8 bytes of memory traffic per pixel).
+    source_rows: Vec<u32>,
 }
 
 impl TransportScratch {
@@ -149,7 +151,7 @@ impl TransportScratch {
     pub fn new(width: usize, height: usize) -> Self {
         Self {
             column_terms: [vec![0.0; width], vec![0.0; width], vec![0.0; width]],
-            sources: vec![NO_SOURCE; width * height],
+            source_rows: vec![NO_SOURCE; height.div_ceil(ROWS_PER_TASK) * width],
         }
     }
 }
@@ -260,8 +262,9 @@ pub fn transport_with(
         centre: [k.cx as f32, k.cy as f32],
         max: [(width - 1) as f32, (height - 1) as f32],
         width: width as u32,
+        geometric: inputs.config.warp_depth == WarpDepth::Current,
     };
-    let geometric = inputs.config.warp_depth == WarpDepth::Current;
+    let geometric = warp.geometric;
     let finish = FinishParameters {
         geometric,
         quadratic: inputs.config.threshold_form == ThresholdForm::Quadratic,
@@ -284,10 +287,10 @@ pub fn transport_with(
         .zip(outputs.delta_z_m.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.newly_discovered.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.object_set[..area].par_chunks_mut(chunk))
-        .zip(scratch.sources.par_chunks_mut(chunk))
+        .zip(scratch.source_rows.par_chunks_mut(width))
         .enumerate()
         .map(
-            |(task, ((((((zc_rows, a_rows), p_rows), dz_rows), n_rows), set_rows), source_rows))| {
+            |(task, ((((((zc_rows, a_rows), p_rows), dz_rows), n_rows), set_rows), source_row))| {
                 let mut counts = TransportCounts::default();
                 let rows = zc_rows
                     .chunks_exact_mut(width)
@@ -295,30 +298,24 @@ pub fn transport_with(
                     .zip(p_rows.chunks_exact_mut(width))
                     .zip(dz_rows.chunks_exact_mut(width))
                     .zip(n_rows.chunks_exact_mut(width))
-                    .zip(set_rows.chunks_exact_mut(width))
-                    .zip(source_rows.chunks_exact_mut(width));
-                for (row, ((((((zc_row, a_row), p_row), dz_row), n_row), set_row), source_row)) in
-                    rows.enumerate()
-                {
+                    .zip(set_rows.chunks_exact_mut(width));
+                for (row, (((((zc_row, a_row), p_row), dz_row), n_row), set_row)) in rows.enumerate() {
                     let y = task * ROWS_PER_TASK + row;
                     let measured_row = inputs.depth_m.row(y);
                     let previous_row = inputs.compensated_previous_m.row(y);
                     // Rotated ray = column term + row term, row term = R[:,1]·ray_y + R[:,2].
                     let ray_y = inputs.rays.ray_y[y];
                     let row_term = [0, 1, 2].map(|axis| rotation[(axis, 1)] * ray_y + rotation[(axis, 2)]);
-                    // Pass 1: the back-projection depth into the ΔZ row, then the warp source of
-                    // every pixel (the ΔZ row now holds z′ until pass 2 reads it).
-                    if geometric {
-                        for ((z, &measured), &previous) in
-                            dz_row.iter_mut().zip(measured_row).zip(previous_row)
-                        {
-                            *z = if measured > 0.0 { measured } else { previous };
-                        }
-                    } else {
-                        dz_row.copy_from_slice(previous_row);
-                    }
+                    // Pass 1: the warp source of every pixel; the ΔZ row holds z′ until pass 2
+                    // reads it.
                     warp_row(
-                        simd, &warp, row_term, terms_x, terms_y, terms_z, dz_row, source_row,
+                        simd,
+                        &warp,
+                        row_term,
+                        [terms_x, terms_y, terms_z],
+                        (measured_row, previous_row),
+                        dz_row,
+                        source_row,
                     );
                     // Pass 2: gather and finish (steps 3–9) and the object labels.
                     let row_counts = finish_row(
@@ -367,30 +364,38 @@ struct WarpParameters {
     /// W − 1, H − 1: the last valid coordinates.
     max: [f32; 2],
     width: u32,
+    /// Back-project at the measured depth where valid (`WarpDepth::Current`).
+    geometric: bool,
 }
 
-/// One row of the warp (algorithm.md §1 step 2): `z_then_qz` holds the back-projection depth
-/// on entry and the warped point's depth z′ on return; `sources` gets the nearest previous
-/// pixel or `NO_SOURCE`. Branch-free, on equal-length slices, so it vectorises.
+/// One row of the warp (algorithm.md §1 step 2): back-projects each pixel at the previous
+/// compensated depth, or (`geometric`) at its measured depth where that is valid; `sources` gets
+/// the nearest previous pixel or `NO_SOURCE`, `qz` the warped point's depth z′. Branch-free, on
+/// equal-length slices, so it vectorises.
 #[inline(always)]
 fn warp_row_generic(
     warp: &WarpParameters,
     row_term: [f32; 3],
-    terms_x: &[f32],
-    terms_y: &[f32],
-    terms_z: &[f32],
-    z_then_qz: &mut [f32],
+    [terms_x, terms_y, terms_z]: [&[f32]; 3],
+    (measured, previous): (&[f32], &[f32]),
+    qz_row: &mut [f32],
     sources: &mut [u32],
 ) {
-    let n = z_then_qz.len();
+    let n = qz_row.len();
     let (terms_x, terms_y, terms_z, sources) =
         (&terms_x[..n], &terms_y[..n], &terms_z[..n], &mut sources[..n]);
+    let (measured, previous) = (&measured[..n], &previous[..n]);
     let [tx, ty, tz] = warp.translation;
     let [fx, fy] = warp.focal;
     let [cx, cy] = warp.centre;
     let [max_x, max_y] = warp.max;
+    let geometric = warp.geometric;
     for i in 0..n {
-        let z = z_then_qz[i];
+        let z = if geometric & (measured[i] > 0.0) {
+            measured[i]
+        } else {
+            previous[i]
+        };
         let qx = z * (terms_x[i] + row_term[0]) + tx;
         let qy = z * (terms_y[i] + row_term[1]) + ty;
         let qz = z * (terms_z[i] + row_term[2]) + tz;
@@ -406,7 +411,7 @@ fn warp_row_generic(
         let line = (clamp_coordinate(v, max_y) + ROUND_MAGIC).to_bits() - ROUND_MAGIC.to_bits();
         let source = line * warp.width + column;
         sources[i] = if valid { source } else { NO_SOURCE };
-        z_then_qz[i] = qz;
+        qz_row[i] = qz;
     }
 }
 
@@ -417,10 +422,9 @@ simd_kernel!(
     (
         warp: &WarpParameters,
         row_term: [f32; 3],
-        terms_x: &[f32],
-        terms_y: &[f32],
-        terms_z: &[f32],
-        z_then_qz: &mut [f32],
+        terms: [&[f32]; 3],
+        measured_and_previous: (&[f32], &[f32]),
+        qz_row: &mut [f32],
         sources: &mut [u32]
     )
 );
