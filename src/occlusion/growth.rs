@@ -153,12 +153,19 @@ pub(super) struct AppearanceGrowth {
 /// bands' lists concatenated in row order, so the frontier is the sequential scan's.
 const SEED_ROWS_PER_TASK: usize = 64;
 
+/// A seed candidate without a previous-image position (see [`Evidence::retain_seeds`]).
+const NO_PREVIOUS_POSITION: u32 = u32::MAX;
+
 /// One band of the seed scan: its seeds and scratch rows.
 #[derive(Debug, Clone)]
 struct SeedBand {
     /// First and one-past-last row (interior rows only).
     rows: std::ops::Range<usize>,
+    /// The band's boundary pixels, then its seeds.
     seeds: Vec<u32>,
+    /// Per boundary pixel: its depth and previous-image position ([`Evidence::retain_seeds`]).
+    depths: Vec<f32>,
+    positions: Vec<u32>,
     /// The vertical AND of three mask rows, and the boundary flags of one row.
     vertical_row: Vec<u8>,
     boundary_row: Vec<u8>,
@@ -338,24 +345,56 @@ impl<'a> Evidence<'a> {
     }
 
     /// Pixel (x, y) may seed the growth: it was an object pixel in the previous frame too (at
-    /// its static-world warp position), or any mask pixel may seed.
+    /// its static-world warp position), or any mask pixel may seed. (The growth filters its
+    /// boundary pixels with [`Evidence::retain_seeds`], the batched form of this test.)
+    #[cfg(test)]
     fn may_seed(&self, x: usize, y: usize) -> bool {
         if !self.growth.persistent_seeds_only {
             return true;
         }
-        let z_m = self.depth_m[y * self.width + x];
+        self.previous_position(x, y, self.depth_m[y * self.width + x])
+            .is_some_and(|i| self.previous_mask[i] != 0)
+    }
+
+    /// The previous-image pixel (index) nearest the static-world warp of pixel (x, y) at depth
+    /// `z_m`; None for an invalid depth, behind the previous camera or outside its image.
+    #[inline]
+    fn previous_position(&self, x: usize, y: usize, z_m: f32) -> Option<usize> {
         if z_m <= 0.0 {
-            return false;
+            return None;
         }
-        let Some((u, v)) = self.warp.apply(x, y, z_m) else {
-            return false;
-        };
+        let (u, v) = self.warp.apply(x, y, z_m)?;
         let (u, v) = (u + 0.5, v + 0.5);
-        u >= 0.0
-            && v >= 0.0
-            && (u as usize) < self.width
-            && (v as usize) < self.height
-            && self.previous_mask[v as usize * self.width + u as usize] != 0
+        (u >= 0.0 && v >= 0.0 && (u as usize) < self.width && (v as usize) < self.height)
+            .then(|| v as usize * self.width + u as usize)
+    }
+
+    /// Keeps the pixels of `candidates` (row-major indices) that may seed, in order: exactly
+    /// [`Evidence::may_seed`] on each, in three passes (depth loads, warps, previous-mask
+    /// loads) whose scattered loads are independent of each other, so many are in flight at
+    /// once instead of one per candidate. `depths` and `positions` are scratch.
+    fn retain_seeds(&self, candidates: &mut Vec<u32>, depths: &mut Vec<f32>, positions: &mut Vec<u32>) {
+        if !self.growth.persistent_seeds_only {
+            return;
+        }
+        depths.clear();
+        depths.extend(candidates.iter().map(|&n| self.depth_m[n as usize]));
+        positions.clear();
+        positions.extend(candidates.iter().zip(depths.iter()).map(|(&n, &z_m)| {
+            let n = n as usize;
+            let y = n / self.width;
+            self.previous_position(n - y * self.width, y, z_m)
+                .map_or(NO_PREVIOUS_POSITION, |i| i as u32)
+        }));
+        let mut kept = 0;
+        for i in 0..candidates.len() {
+            let position = positions[i];
+            if position != NO_PREVIOUS_POSITION && self.previous_mask[position as usize] != 0 {
+                candidates[kept] = candidates[i];
+                kept += 1;
+            }
+        }
+        candidates.truncate(kept);
     }
 
     /// The accumulation a pixel of depth `zn_m` grown from `zf_m` (accumulation `af_m`) gets.
@@ -468,6 +507,8 @@ impl AppearanceGrowth {
                 .map(|start| SeedBand {
                     rows: start..(start + SEED_ROWS_PER_TASK).min(size.height - 1),
                     seeds: Vec::with_capacity(SEED_ROWS_PER_TASK * size.width),
+                    depths: Vec::with_capacity(SEED_ROWS_PER_TASK * size.width),
+                    positions: Vec::with_capacity(SEED_ROWS_PER_TASK * size.width),
                     vertical_row: vec![0; size.width],
                     boundary_row: vec![0; size.width],
                 })
@@ -535,25 +576,20 @@ impl AppearanceGrowth {
             (&self.ray_x, &self.ray_y),
             (&self.previous_gray, &self.previous_mask),
         );
-        let state = GrowthBuffers {
+        let mut state = GrowthBuffers {
             looked_at: &mut self.looked_at,
             frontier: &mut self.frontier,
             next: &mut self.next,
             bands: &mut self.bands,
         };
-        // The copy of this frame's gray image (for the next frame) overlaps the growth: both
-        // are memory-bound, and the growth is mostly sequential.
+        let mask = mask.as_mut_slice();
+        state.find_seeds(&evidence, mask);
+        // The copy of this frame's gray image (for the next frame) overlaps the rings: both
+        // are memory-bound, and the rings are sequential (the seed scan before uses every core).
         let staged_gray = self.staged_gray.as_mut_slice();
         let ((), grown) = rayon::join(
             || staged_gray.copy_from_slice(frame.gray.as_slice()),
-            || {
-                state.grow(
-                    &evidence,
-                    frame.config,
-                    mask.as_mut_slice(),
-                    accumulation_m.as_mut_slice(),
-                )
-            },
+            || state.grow_rings(&evidence, frame.config, mask, accumulation_m.as_mut_slice()),
         );
         self.staged = true;
         counts.grown = grown;
@@ -570,11 +606,10 @@ struct GrowthBuffers<'a> {
 }
 
 impl GrowthBuffers<'_> {
-    /// Seeds, then rings; returns the pixels grown.
-    fn grow(self, evidence: &Evidence, config: &OcclusionConfig, m: &mut [u8], a: &mut [f32]) -> usize {
-        let (width, height, growth) = (evidence.width, evidence.height, evidence.growth);
-        // Seeds: interior boundary pixels of the mask that may seed (rule of
-        // `persistent_seeds_only`), found band by band in parallel.
+    /// The seeds, into the frontier: interior boundary pixels of the mask `m` that may seed
+    /// (rule of `persistent_seeds_only`), found band by band in parallel, in row-major order.
+    fn find_seeds(&mut self, evidence: &Evidence, m: &[u8]) {
+        let width = evidence.width;
         {
             let mask: &[u8] = m;
             self.bands.par_iter_mut().for_each(|band| {
@@ -586,18 +621,20 @@ impl GrowthBuffers<'_> {
                     band.rows.clone(),
                     &mut band.vertical_row,
                     &mut band.boundary_row,
-                    |x, y| {
-                        if evidence.may_seed(x, y) {
-                            seeds.push((y * width + x) as u32);
-                        }
-                    },
+                    |x, y| seeds.push((y * width + x) as u32),
                 );
+                evidence.retain_seeds(&mut band.seeds, &mut band.depths, &mut band.positions);
             });
         }
         self.frontier.clear();
         for band in self.bands.iter() {
             self.frontier.extend_from_slice(&band.seeds);
         }
+    }
+
+    /// Grows from the frontier (the seeds) ring by ring; returns the pixels grown.
+    fn grow_rings(self, evidence: &Evidence, config: &OcclusionConfig, m: &mut [u8], a: &mut [f32]) -> usize {
+        let (width, height, growth) = (evidence.width, evidence.height, evidence.growth);
         let z = evidence.depth_m;
         relabel_unset_border(m, width, height, 0, LOOKED_AT);
         self.looked_at.clear();
