@@ -133,127 +133,26 @@ fn next_epoch(epoch: &mut u32, stamps: &mut [u32]) -> u32 {
     *epoch
 }
 
-impl Components {
-    pub(super) fn new(size: ImageSize) -> Self {
-        let n = size.area();
-        Self {
-            width: size.width,
-            height: size.height,
-            object_set: vec![0; n],
-            target: vec![0; n],
-            target_pixels: Vec::with_capacity(n),
-            target_columns: vec![(0, 0); size.height],
-            source_stamp: vec![0; n],
-            source_epoch: 0,
-            candidate_stamp: vec![0; n],
-            candidate_epoch: 0,
-            frontier: Vec::with_capacity(n),
-            candidates: Vec::with_capacity(n),
-            updates: Vec::with_capacity(n),
-            morph_a: vec![0; n],
-            morph_b: vec![0; n],
-            runs: RunLabelling::new(size.width, size.height),
-            stamp_all_sources: false,
-        }
-    }
+/// The thin-structure filter's buffers, borrowed from [`Components`] apart from the target
+/// list's (the two run side by side).
+struct ThinStructureFilter<'a> {
+    /// The object set O₀ (0 / 1).
+    object_set: &'a mut [u8],
+    /// Morphology scratch (0 / 1 per pixel).
+    opened: &'a mut [u8],
+    scratch: &'a mut [u8],
+    width: usize,
+    height: usize,
+}
 
-    /// The object-set buffer: the transport writes O₀ into it (1 on set pixels, 0 elsewhere)
-    /// before [`Components::suppress_and_predict`].
-    pub(super) fn object_set_mut(&mut self) -> &mut [u8] {
-        &mut self.object_set
-    }
-
-    /// Step 10: labels the object set already in the object-set buffer (bounding box `bounds`),
-    /// erases components below `min_object_pixels` from A and, when enabled, grows the others
-    /// into Ñ. Components are handled in the row-major order of their first pixel (they share
-    /// the prediction target, so the order matters).
-    pub(super) fn suppress_and_predict(
-        &mut self,
-        config: &OcclusionConfig,
-        min_object_pixels: usize,
-        bounds: Option<PixelBounds>,
-        compensated_m: &DepthMeters,
-        newly_discovered: &Image<u8>,
-        accumulation_m: &mut DepthMeters,
-    ) -> LabelStats {
-        let mut stats = LabelStats::default();
-        let Some(bounds) = bounds else {
-            return stats;
-        };
-        if config.thin_structure_radius_px > 0 {
-            stats.thin_pixels_erased = self.erase_thin_structures(
-                config.thin_structure_radius_px,
-                config.thin_structure_border_margin_px,
-                bounds,
-                accumulation_m,
-            );
-        }
-        if config.predict_newly_discovered {
-            self.target_pixels.clear();
-            let (width, height) = (self.width, self.height);
-            // Interior rows and columns only (none in images narrower or lower than 3 px).
-            let interior_rows = if width > 2 {
-                1..height.saturating_sub(1)
-            } else {
-                0..0
-            };
-            self.target_columns.fill((0, 0));
-            for y in interior_rows {
-                let first = y * width + 1;
-                let interior = &newly_discovered.as_slice()[first..(y + 1) * width - 1];
-                let row_start = self.target_pixels.len();
-                let mut x = 0;
-                while let Some(offset) = position_nonzero_u8(&interior[x..]) {
-                    self.target_pixels.push((first + x + offset) as u32);
-                    x += offset + 1;
-                }
-                if let (Some(&first_pixel), Some(&last_pixel)) =
-                    (self.target_pixels.get(row_start), self.target_pixels.last())
-                {
-                    let row = (y * width) as u32;
-                    self.target_columns[y] = (first_pixel - row, last_pixel - row + 1);
-                }
-            }
-            for &t in &self.target_pixels {
-                self.target[t as usize] = 1;
-            }
-        }
-        let (box_width, box_height) = box_dims(bounds);
-        stats.components = self.runs.label(
-            &self.object_set[bounds.y0 * self.width + bounds.x0..],
-            self.width,
-            box_width,
-            box_height,
-            (bounds.x0, bounds.y0),
-        );
-        for k in 0..stats.components {
-            if self.runs.pixels(k) < min_object_pixels {
-                let a = accumulation_m.as_mut_slice();
-                for run in self.runs.runs(k) {
-                    a[run.pixels(self.width)].fill(0.0);
-                }
-                stats.small_components_erased += 1;
-            } else if config.predict_newly_discovered {
-                let (filled, filled_bounds) = self.predict(k, config, compensated_m, accumulation_m);
-                stats.predicted_pixels += filled;
-                stats.predicted_bounds = PixelBounds::union(stats.predicted_bounds, filled_bounds);
-            }
-        }
-        if config.predict_newly_discovered {
-            for &t in &self.target_pixels {
-                self.target[t as usize] = 0;
-            }
-        }
-        stats
-    }
-
+impl ThinStructureFilter<'_> {
     /// Thin-structure filter (see `OcclusionConfig::thin_structure_radius_px`): opening of the
-    /// object set (`self.object_set`, inside its bounding box `bounds`) with a (2r+1)² square. Object pixels not
+    /// object set (inside its bounding box `bounds`) with a (2r+1)² square. Object pixels not
     /// covered by the opening and farther than `border_margin_px` from the image border (where
     /// an object entering the view first appears as a thin sliver) leave the object set and lose
     /// their accumulation, like small components. Returns the pixels erased.
-    fn erase_thin_structures(
-        &mut self,
+    fn erase(
+        self,
         radius: usize,
         border_margin_px: usize,
         bounds: PixelBounds,
@@ -265,7 +164,7 @@ impl Components {
         // exactly how the filter treats pixels outside its image.
         let (box_width, box_height) = box_dims(bounds);
         let box_area = box_width * box_height;
-        let (opened, scratch) = (&mut self.morph_a[..box_area], &mut self.morph_b[..box_area]);
+        let (opened, scratch) = (&mut self.opened[..box_area], &mut self.scratch[..box_area]);
         let set_box = &self.object_set[bounds.y0 * width + bounds.x0..];
         // Erosion (outside the image counts as background) into `opened`, then dilation; the
         // filtered images are compact (rows of the box's width).
@@ -309,6 +208,163 @@ impl Components {
             erased += row_erased as usize;
         }
         erased
+    }
+}
+
+/// The prediction target's buffers, borrowed from [`Components`] (see its fields).
+struct PredictionTargets<'a> {
+    pixels: &'a mut Vec<u32>,
+    columns: &'a mut [(u32, u32)],
+    target: &'a mut [u8],
+    width: usize,
+}
+
+impl PredictionTargets<'_> {
+    /// Lists the interior pixels of Ñ with each row's column span, and marks them in the target.
+    fn collect(self, newly_discovered: &Image<u8>) {
+        let width = self.width;
+        let height = self.columns.len();
+        self.pixels.clear();
+        // Interior rows and columns only (none in images narrower or lower than 3 px).
+        let interior_rows = if width > 2 {
+            1..height.saturating_sub(1)
+        } else {
+            0..0
+        };
+        self.columns.fill((0, 0));
+        for y in interior_rows {
+            let first = y * width + 1;
+            let interior = &newly_discovered.as_slice()[first..(y + 1) * width - 1];
+            let row_start = self.pixels.len();
+            let mut x = 0;
+            while let Some(offset) = position_nonzero_u8(&interior[x..]) {
+                self.pixels.push((first + x + offset) as u32);
+                x += offset + 1;
+            }
+            if let (Some(&first_pixel), Some(&last_pixel)) = (self.pixels.get(row_start), self.pixels.last())
+            {
+                let row = (y * width) as u32;
+                self.columns[y] = (first_pixel - row, last_pixel - row + 1);
+            }
+        }
+        for &t in self.pixels.iter() {
+            self.target[t as usize] = 1;
+        }
+    }
+}
+
+impl Components {
+    pub(super) fn new(size: ImageSize) -> Self {
+        let n = size.area();
+        Self {
+            width: size.width,
+            height: size.height,
+            object_set: vec![0; n],
+            target: vec![0; n],
+            target_pixels: Vec::with_capacity(n),
+            target_columns: vec![(0, 0); size.height],
+            source_stamp: vec![0; n],
+            source_epoch: 0,
+            candidate_stamp: vec![0; n],
+            candidate_epoch: 0,
+            frontier: Vec::with_capacity(n),
+            candidates: Vec::with_capacity(n),
+            updates: Vec::with_capacity(n),
+            morph_a: vec![0; n],
+            morph_b: vec![0; n],
+            runs: RunLabelling::new(size.width, size.height),
+            stamp_all_sources: false,
+        }
+    }
+
+    /// The buffers of the thin-structure filter and of the prediction target, apart.
+    fn thin_filter_and_targets(&mut self) -> (ThinStructureFilter<'_>, PredictionTargets<'_>) {
+        let (width, height) = (self.width, self.height);
+        let thin = ThinStructureFilter {
+            object_set: &mut self.object_set,
+            opened: &mut self.morph_a,
+            scratch: &mut self.morph_b,
+            width,
+            height,
+        };
+        let targets = PredictionTargets {
+            pixels: &mut self.target_pixels,
+            columns: &mut self.target_columns,
+            target: &mut self.target,
+            width,
+        };
+        (thin, targets)
+    }
+
+    /// The object-set buffer: the transport writes O₀ into it (1 on set pixels, 0 elsewhere)
+    /// before [`Components::suppress_and_predict`].
+    pub(super) fn object_set_mut(&mut self) -> &mut [u8] {
+        &mut self.object_set
+    }
+
+    /// Step 10: labels the object set already in the object-set buffer (bounding box `bounds`),
+    /// erases components below `min_object_pixels` from A and, when enabled, grows the others
+    /// into Ñ. Components are handled in the row-major order of their first pixel (they share
+    /// the prediction target, so the order matters).
+    pub(super) fn suppress_and_predict(
+        &mut self,
+        config: &OcclusionConfig,
+        min_object_pixels: usize,
+        bounds: Option<PixelBounds>,
+        compensated_m: &DepthMeters,
+        newly_discovered: &Image<u8>,
+        accumulation_m: &mut DepthMeters,
+    ) -> LabelStats {
+        let mut stats = LabelStats::default();
+        let Some(bounds) = bounds else {
+            return stats;
+        };
+        // The opening and the target list read and write disjoint buffers: run them side by side.
+        let (thin, targets) = self.thin_filter_and_targets();
+        let (thin_pixels_erased, ()) = rayon::join(
+            || match config.thin_structure_radius_px {
+                0 => 0,
+                radius => thin.erase(
+                    radius,
+                    config.thin_structure_border_margin_px,
+                    bounds,
+                    accumulation_m,
+                ),
+            },
+            || {
+                if config.predict_newly_discovered {
+                    targets.collect(newly_discovered);
+                }
+            },
+        );
+        stats.thin_pixels_erased = thin_pixels_erased;
+        let (box_width, box_height) = box_dims(bounds);
+        stats.components = self.runs.label(
+            &self.object_set[bounds.y0 * self.width + bounds.x0..],
+            self.width,
+            box_width,
+            box_height,
+            (bounds.x0, bounds.y0),
+        );
+        for k in 0..stats.components {
+            if self.runs.pixels(k) < min_object_pixels {
+                let a = accumulation_m.as_mut_slice();
+                for run in self.runs.runs(k) {
+                    a[run.pixels(self.width)].fill(0.0);
+                }
+                stats.small_components_erased += 1;
+            } else if config.predict_newly_discovered {
+                let (filled, filled_bounds) = self.predict(k, config, compensated_m, accumulation_m);
+                stats.predicted_pixels += filled;
+                stats.predicted_bounds = PixelBounds::union(stats.predicted_bounds, filled_bounds);
+            }
+        }
+        if config.predict_newly_discovered {
+            for &t in &self.target_pixels {
+                self.target[t as usize] = 0;
+            }
+        }
+        stats
     }
 
     /// Breadth-first ring growth of component `k` of the last labelling into the shared
@@ -1099,7 +1155,10 @@ mod tests {
                 let mut components = Components::new(size);
                 components.object_set.copy_from_slice(&set);
                 let mut a = DepthMeters::filled(size, 1.0);
-                let erased = components.erase_thin_structures(radius, margin, bounds, &mut a);
+                let erased = components
+                    .thin_filter_and_targets()
+                    .0
+                    .erase(radius, margin, bounds, &mut a);
                 (erased, components.object_set, a.into_vec())
             };
             let (fast, slow) = (run(bounding), run(whole));
