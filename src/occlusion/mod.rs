@@ -252,7 +252,7 @@ pub struct OcclusionStats {
     pub motion_rejected: bool,
     /// Time of the transport kernel (warp, compensation, ΔZ, accumulation, truncation, Ñ), µs.
     pub transport_us: u64,
-    /// Time of labelling, suppression and prediction, µs.
+    /// Time of labelling, suppression and prediction (the motion check runs beside them), µs.
     pub label_predict_us: u64,
     /// Time of the object mask and pruning, µs.
     pub prune_us: u64,
@@ -505,28 +505,42 @@ impl OcclusionDetector {
             newly_discovered: &mut self.newly_discovered,
             object_set: self.components.object_set_mut(),
         };
-        let (reference_transport, transport_scratch) =
-            (self.reference_transport, &mut self.transport_scratch);
-        // The motion check runs beside the transport, which only writes next-frame buffers: a
-        // rejected motion discards them and restarts the sequence (the check is a sequential
-        // pass over scattered samples, the transport uses every core).
-        let (verdict, counts) = rayon::join(
+        let counts = if self.reference_transport {
+            transport::transport_scalar(&inputs, outputs)
+        } else {
+            transport::transport(&inputs, &mut self.transport_scratch, outputs)
+        };
+        // The next-frame buffers become the current ones; the previous frame's compensated
+        // depth stays in `compensated_next_m` for the motion check.
+        std::mem::swap(&mut self.compensated_m, &mut self.compensated_next_m);
+        std::mem::swap(&mut self.accumulation_m, &mut self.accumulation_next_m);
+        self.stats.transport_us = started.elapsed().as_micros() as u64;
+
+        let started = Instant::now();
+        // The motion check runs beside the labelling: the check is a sequential pass over
+        // scattered samples, the labelling mostly sequential too, and neither reads what the
+        // other writes. A rejected motion discards the frame's work and restarts the sequence
+        // (the restart overwrites every buffer the labelling wrote).
+        let (verdict, label_stats) = rayon::join(
             || {
                 motion_verdict(
                     &self.config,
                     &self.intrinsics,
-                    (&self.compensated_m, &self.mask),
+                    (&self.compensated_next_m, &self.mask),
                     depth_m,
                     current_from_previous,
                     &mut self.motion_check_rays,
                 )
             },
             || {
-                if reference_transport {
-                    transport::transport_scalar(&inputs, outputs)
-                } else {
-                    transport::transport(&inputs, transport_scratch, outputs)
-                }
+                self.components.suppress_and_predict(
+                    &self.config,
+                    self.min_object_pixels,
+                    counts.object_bounds,
+                    &self.compensated_m,
+                    &self.newly_discovered,
+                    &mut self.accumulation_m,
+                )
             },
         );
         self.stats.motion_consistency = verdict.motion_consistency;
@@ -539,19 +553,6 @@ impl OcclusionDetector {
         self.frames += 1;
         self.stats.warped_pixels = counts.warped;
         self.stats.newly_discovered_pixels = counts.newly_discovered;
-        std::mem::swap(&mut self.compensated_m, &mut self.compensated_next_m);
-        std::mem::swap(&mut self.accumulation_m, &mut self.accumulation_next_m);
-        self.stats.transport_us = started.elapsed().as_micros() as u64;
-
-        let started = Instant::now();
-        let label_stats = self.components.suppress_and_predict(
-            &self.config,
-            self.min_object_pixels,
-            counts.object_bounds,
-            &self.compensated_m,
-            &self.newly_discovered,
-            &mut self.accumulation_m,
-        );
         self.stats.components = label_stats.components;
         self.stats.thin_pixels_erased = label_stats.thin_pixels_erased;
         self.stats.small_components_erased = label_stats.small_components_erased;
