@@ -494,14 +494,15 @@ fn finish_row(
         object: 0,
         object_columns: (usize::MAX, 0),
     };
+    // The gathered values of one block (every block's gather overwrites its part).
+    let mut sampled = [0.0f32; FINISH_BLOCK];
+    let mut carried_a = [0.0f32; FINISH_BLOCK];
+    let mut carried_p = [0u8; FINISH_BLOCK];
     let mut start = 0;
     while start < n {
         let len = FINISH_BLOCK.min(n - start);
         let end = start + len;
         let sources = &sources[start..end];
-        let mut sampled = [0.0f32; FINISH_BLOCK];
-        let mut carried_a = [0.0f32; FINISH_BLOCK];
-        let mut carried_p = [0u8; FINISH_BLOCK];
         gather_block(
             simd,
             sources,
