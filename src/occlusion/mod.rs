@@ -286,7 +286,9 @@ pub struct OcclusionDetector {
     compensated_next_m: DepthMeters,
     accumulation_next_m: DepthMeters,
     predicted_carried: Image<u8>,
+    /// ΔZ of the latest frame, written only while `record_occlusion_map` is on.
     delta_z_m: DepthMeters,
+    record_occlusion_map: bool,
     newly_discovered: Image<u8>,
     components: Components,
     /// Appearance-gated object completion state (previous gray image, growth buffers).
@@ -340,6 +342,7 @@ impl OcclusionDetector {
             accumulation_next_m: depth(),
             predicted_carried: Image::filled(size, 0),
             delta_z_m: depth(),
+            record_occlusion_map: false,
             newly_discovered: Image::filled(size, 0),
             components: Components::new(size),
             growth: AppearanceGrowth::new(size),
@@ -387,9 +390,22 @@ impl OcclusionDetector {
         &self.compensated_m
     }
 
-    /// The occlusion map ΔZ of the latest frame (m).
-    pub fn occlusion_m(&self) -> &DepthMeters {
-        &self.delta_z_m
+    /// The occlusion map ΔZ of the latest frame (m), when recording it is on
+    /// ([`OcclusionDetector::record_occlusion_map`]); None otherwise.
+    pub fn occlusion_m(&self) -> Option<&DepthMeters> {
+        self.record_occlusion_map.then_some(&self.delta_z_m)
+    }
+
+    /// Keep the occlusion map ΔZ of every frame for [`OcclusionDetector::occlusion_m`] (off by
+    /// default). ΔZ feeds nothing after the accumulation, so the detector does not write it out
+    /// unless asked: one image fewer to write per frame (≈ 5 % of the update at 640×480).
+    /// Masks, A and statistics do not change either way.
+    pub fn record_occlusion_map(&mut self, on: bool) {
+        if on && !self.record_occlusion_map {
+            // Until the next update, ΔZ is that of no frame at all.
+            self.delta_z_m.fill(0.0);
+        }
+        self.record_occlusion_map = on;
     }
 
     /// Newly discovered area Ñ of the latest frame (0 / 1).
@@ -501,7 +517,11 @@ impl OcclusionDetector {
             compensated_m: &mut self.compensated_next_m,
             accumulation_m: &mut self.accumulation_next_m,
             predicted_carried: &mut self.predicted_carried,
-            delta_z_m: &mut self.delta_z_m,
+            delta_z_m: if self.record_occlusion_map {
+                Some(&mut self.delta_z_m)
+            } else {
+                None
+            },
             newly_discovered: &mut self.newly_discovered,
             object_set: self.components.object_set_mut(),
         };

@@ -85,7 +85,7 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             compensated_m: &mut zc1,
             accumulation_m: &mut a1,
             predicted_carried: &mut p1,
-            delta_z_m: &mut dz1,
+            delta_z_m: Some(&mut dz1),
             newly_discovered: &mut n1,
             object_set: &mut l1,
         },
@@ -100,12 +100,32 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             compensated_m: &mut zc3,
             accumulation_m: &mut a3,
             predicted_carried: &mut p3,
-            delta_z_m: &mut dz3,
+            delta_z_m: Some(&mut dz3),
             newly_discovered: &mut n3,
             object_set: &mut l3,
         },
     );
     let bits = |img: &DepthMeters| img.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    // Without ΔZ recorded, every other output is the same.
+    let (mut zc4, mut a4, mut p4, _, mut n4, mut l4) = blank();
+    let unrecorded = transport(
+        &inputs,
+        &mut scratch,
+        TransportOutputs {
+            compensated_m: &mut zc4,
+            accumulation_m: &mut a4,
+            predicted_carried: &mut p4,
+            delta_z_m: None,
+            newly_discovered: &mut n4,
+            object_set: &mut l4,
+        },
+    );
+    assert_eq!(fast, unrecorded);
+    assert_eq!(bits(&zc1), bits(&zc4));
+    assert_eq!(bits(&a1), bits(&a4));
+    assert_eq!(p1.as_slice(), p4.as_slice());
+    assert_eq!(n1.as_slice(), n4.as_slice());
+    assert_eq!(l1, l4);
     assert_eq!(fast, baseline);
     assert_eq!(bits(&zc1), bits(&zc3));
     assert_eq!(bits(&a1), bits(&a3));
@@ -119,7 +139,7 @@ fn transport_disagreement(scenario: Scenario, config: OcclusionConfig) -> (usize
             compensated_m: &mut zc2,
             accumulation_m: &mut a2,
             predicted_carried: &mut p2,
-            delta_z_m: &mut dz2,
+            delta_z_m: Some(&mut dz2),
             newly_discovered: &mut n2,
             object_set: &mut l2,
         },
@@ -698,4 +718,37 @@ fn the_mask_is_exactly_the_thresholded_accumulation_after_every_update() {
         predicted_frames > 10 && object_frames > 100,
         "{predicted_frames} {object_frames}"
     );
+}
+
+#[test]
+fn the_occlusion_map_is_kept_only_on_request_and_changes_nothing_else() {
+    let config = SequenceConfig {
+        size: ImageSize::new(160, 120),
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(Scenario::SmallObjectCrossing, config);
+    let k = config.intrinsics();
+    let mut plain = OcclusionDetector::new(config.size, k, OcclusionConfig::default()).unwrap();
+    let mut recording = plain.clone();
+    assert!(plain.occlusion_m().is_none());
+    recording.record_occlusion_map(true);
+    let mut occluded_frames = 0;
+    for i in 0..40 {
+        let frame = sequence.frame(i);
+        let motion = sequence.current_from_previous(i);
+        let mask = plain
+            .update_with_gray(&frame.depth_m, Some(&frame.gray), &motion)
+            .unwrap()
+            .clone();
+        let recorded = recording
+            .update_with_gray(&frame.depth_m, Some(&frame.gray), &motion)
+            .unwrap();
+        assert!(mask == *recorded, "frame {i}: masks differ");
+        assert!(plain.accumulation_m() == recording.accumulation_m(), "frame {i}");
+        assert!(plain.occlusion_m().is_none());
+        let delta_z = recording.occlusion_m().unwrap();
+        // ΔZ > 0 where something came closer: the crossing object's leading edge.
+        occluded_frames += usize::from(delta_z.as_slice().iter().any(|&dz| dz > 0.1));
+    }
+    assert!(occluded_frames > 10, "{occluded_frames}");
 }

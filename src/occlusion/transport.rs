@@ -144,6 +144,9 @@ pub struct TransportScratch {
     /// parallel task: each task reuses its row, which stays in L1 (a whole-image buffer would
     /// cost 8 bytes of memory traffic per pixel).
     source_rows: Vec<u32>,
+    /// One row per parallel task holding z′, then ΔZ, when ΔZ is not recorded
+    /// ([`TransportOutputs::delta_z_m`] is None).
+    staging_rows: Vec<f32>,
 }
 
 impl TransportScratch {
@@ -152,6 +155,7 @@ impl TransportScratch {
         Self {
             column_terms: [vec![0.0; width], vec![0.0; width], vec![0.0; width]],
             source_rows: vec![NO_SOURCE; height.div_ceil(ROWS_PER_TASK) * width],
+            staging_rows: vec![0.0; height.div_ceil(ROWS_PER_TASK) * width],
         }
     }
 }
@@ -184,8 +188,8 @@ pub struct TransportOutputs<'a> {
     pub accumulation_m: &'a mut DepthMeters,
     /// P̂: P_i sampled through the warp (0 / 1).
     pub predicted_carried: &'a mut Image<u8>,
-    /// ΔZ (m).
-    pub delta_z_m: &'a mut DepthMeters,
+    /// ΔZ (m), when it is recorded (it is no input to any later step: only for inspection).
+    pub delta_z_m: Option<&'a mut DepthMeters>,
     /// Ñ (0 / 1).
     pub newly_discovered: &'a mut Image<u8>,
     /// 1 where A > τ_α (the object set O₀), else 0; one entry per pixel.
@@ -278,13 +282,19 @@ pub fn transport_with(
     let previous_a = &inputs.accumulation_previous_m.as_slice()[..area];
     let previous_p = &inputs.predicted_previous.as_slice()[..area];
     let chunk = ROWS_PER_TASK * width;
+    // ΔZ into the output image (a task's rows), or into one staging row per task.
+    let recording = outputs.delta_z_m.is_some();
+    let (dz_buffer, dz_chunk) = match outputs.delta_z_m {
+        Some(delta_z_m) => (delta_z_m.as_mut_slice(), chunk),
+        None => (&mut scratch.staging_rows[..], width),
+    };
     outputs
         .compensated_m
         .as_mut_slice()
         .par_chunks_mut(chunk)
         .zip(outputs.accumulation_m.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.predicted_carried.as_mut_slice().par_chunks_mut(chunk))
-        .zip(outputs.delta_z_m.as_mut_slice().par_chunks_mut(chunk))
+        .zip(dz_buffer.par_chunks_mut(dz_chunk))
         .zip(outputs.newly_discovered.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.object_set[..area].par_chunks_mut(chunk))
         .zip(scratch.source_rows.par_chunks_mut(width))
@@ -296,10 +306,14 @@ pub fn transport_with(
                     .chunks_exact_mut(width)
                     .zip(a_rows.chunks_exact_mut(width))
                     .zip(p_rows.chunks_exact_mut(width))
-                    .zip(dz_rows.chunks_exact_mut(width))
                     .zip(n_rows.chunks_exact_mut(width))
                     .zip(set_rows.chunks_exact_mut(width));
-                for (row, (((((zc_row, a_row), p_row), dz_row), n_row), set_row)) in rows.enumerate() {
+                for (row, ((((zc_row, a_row), p_row), n_row), set_row)) in rows.enumerate() {
+                    let dz_row = if recording {
+                        &mut dz_rows[row * width..(row + 1) * width]
+                    } else {
+                        &mut dz_rows[..width]
+                    };
                     let y = task * ROWS_PER_TASK + row;
                     let measured_row = inputs.depth_m.row(y);
                     let previous_row = inputs.compensated_previous_m.row(y);
@@ -814,7 +828,7 @@ pub(super) fn object_mask_block_with(
 
 /// Reference implementation: the algorithm.md §1 steps as separate full-image passes, with f64
 /// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
-pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<'_>) -> TransportCounts {
+pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutputs<'_>) -> TransportCounts {
     let size = inputs.depth_m.size();
     let (width, height) = (size.width, size.height);
     // Step 2: warp field.
@@ -868,7 +882,9 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, outputs: TransportOutputs<
         }
         let newly = (sampled == 0.0) != (compensated == 0.0);
         outputs.compensated_m.set(x, y, compensated);
-        outputs.delta_z_m.set(x, y, delta_z);
+        if let Some(delta_z_m) = outputs.delta_z_m.as_deref_mut() {
+            delta_z_m.set(x, y, delta_z);
+        }
         outputs.accumulation_m.set(x, y, a);
         outputs.predicted_carried.set(x, y, carried_p);
         outputs.newly_discovered.set(x, y, u8::from(newly));
