@@ -606,26 +606,23 @@ struct GrowthBuffers<'a> {
 }
 
 impl GrowthBuffers<'_> {
-    /// The seeds, into the frontier: interior boundary pixels of the mask `m` that may seed
+    /// The seeds, into the frontier: interior boundary pixels of `mask` that may seed
     /// (rule of `persistent_seeds_only`), found band by band in parallel, in row-major order.
-    fn find_seeds(&mut self, evidence: &Evidence, m: &[u8]) {
+    fn find_seeds(&mut self, evidence: &Evidence, mask: &[u8]) {
         let width = evidence.width;
-        {
-            let mask: &[u8] = m;
-            self.bands.par_iter_mut().for_each(|band| {
-                band.seeds.clear();
-                let seeds = &mut band.seeds;
-                for_each_boundary_pixel(
-                    mask,
-                    width,
-                    band.rows.clone(),
-                    &mut band.vertical_row,
-                    &mut band.boundary_row,
-                    |x, y| seeds.push((y * width + x) as u32),
-                );
-                evidence.retain_seeds(&mut band.seeds, &mut band.depths, &mut band.positions);
-            });
-        }
+        self.bands.par_iter_mut().for_each(|band| {
+            band.seeds.clear();
+            let seeds = &mut band.seeds;
+            for_each_boundary_pixel(
+                mask,
+                width,
+                band.rows.clone(),
+                &mut band.vertical_row,
+                &mut band.boundary_row,
+                |x, y| seeds.push((y * width + x) as u32),
+            );
+            evidence.retain_seeds(&mut band.seeds, &mut band.depths, &mut band.positions);
+        });
         self.frontier.clear();
         for band in self.bands.iter() {
             self.frontier.extend_from_slice(&band.seeds);
