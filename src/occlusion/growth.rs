@@ -776,6 +776,40 @@ mod tests {
         PinholeIntrinsics::new(131.25, 131.25, 79.5, 59.5)
     }
 
+    /// The fixed test scenes' camera: default detector config, the test intrinsics, no motion.
+    struct StillCamera {
+        config: OcclusionConfig,
+        intrinsics: PinholeIntrinsics,
+        motion: Isometry3<f64>,
+    }
+
+    impl StillCamera {
+        fn new() -> Self {
+            Self {
+                config: OcclusionConfig::default(),
+                intrinsics: intrinsics(),
+                motion: Isometry3::identity(),
+            }
+        }
+
+        /// A frame of depth `depth_m` and gray image `gray` grown with `growth`.
+        fn frame<'a>(
+            &'a self,
+            growth: &'a AppearanceGrowthConfig,
+            depth_m: &'a DepthMeters,
+            gray: &'a GrayF32,
+        ) -> GrowthFrame<'a> {
+            GrowthFrame {
+                growth,
+                config: &self.config,
+                intrinsics: &self.intrinsics,
+                previous_from_current: &self.motion,
+                depth_m,
+                gray,
+            }
+        }
+    }
+
     fn in_box(x: usize, y: usize) -> bool {
         BOX_X.contains(&x) && BOX_Y.contains(&y)
     }
@@ -818,7 +852,6 @@ mod tests {
         current: &GrayF32,
         growth: AppearanceGrowthConfig,
     ) -> (Mask, DepthMeters, usize) {
-        let config = OcclusionConfig::default();
         let seed = |x: usize, y: usize| SEED_X.contains(&x) && BOX_Y.contains(&y);
         let mut mask = Image::from_fn(SIZE, |x, y| if seed(x, y) { MASK_SET } else { 0 });
         let mut accumulation = Image::from_fn(SIZE, |x, y| if seed(x, y) { 1.0 } else { 0.0 });
@@ -827,14 +860,7 @@ mod tests {
         // The strip was already detected in the previous frame (the growth's seeds).
         remember_frame(&mut state, previous, &mask);
         let counts = state.grow(
-            &GrowthFrame {
-                growth: &growth,
-                config: &config,
-                intrinsics: &intrinsics(),
-                previous_from_current: &Isometry3::identity(),
-                depth_m: &depth(),
-                gray: current,
-            },
+            &StillCamera::new().frame(&growth, &depth(), current),
             &mut mask,
             &mut accumulation,
             mask_pixels,
@@ -980,35 +1006,20 @@ mod tests {
                 let mut state = AppearanceGrowth::new(scene.size);
                 remember_frame(&mut state, &scene.previous_gray, &scene.previous_mask);
                 let mask_pixels = scene.mask.as_slice().iter().filter(|&&m| m != 0).count();
+                let frame = GrowthFrame {
+                    growth,
+                    config: &config,
+                    intrinsics: &intrinsics,
+                    previous_from_current: &scene.motion,
+                    depth_m: &scene.depth,
+                    gray: &scene.gray,
+                };
                 let (mut mask, mut accumulation) = (scene.mask.clone(), scene.accumulation.clone());
-                let counts = state.grow(
-                    &GrowthFrame {
-                        growth,
-                        config: &config,
-                        intrinsics: &intrinsics,
-                        previous_from_current: &scene.motion,
-                        depth_m: &scene.depth,
-                        gray: &scene.gray,
-                    },
-                    &mut mask,
-                    &mut accumulation,
-                    mask_pixels,
-                );
+                let counts = state.grow(&frame, &mut mask, &mut accumulation, mask_pixels);
                 let (mut expected_mask, mut expected_accumulation) =
                     (scene.mask.clone(), scene.accumulation.clone());
-                let expected_grown = grow_reference(
-                    &state,
-                    &GrowthFrame {
-                        growth,
-                        config: &config,
-                        intrinsics: &intrinsics,
-                        previous_from_current: &scene.motion,
-                        depth_m: &scene.depth,
-                        gray: &scene.gray,
-                    },
-                    &mut expected_mask,
-                    &mut expected_accumulation,
-                );
+                let expected_grown =
+                    grow_reference(&state, &frame, &mut expected_mask, &mut expected_accumulation);
                 assert_eq!(counts.grown, expected_grown, "seed {seed}, {growth:?}");
                 assert!(mask == expected_mask, "seed {seed}, {growth:?}: masks differ");
                 assert!(
@@ -1031,14 +1042,7 @@ mod tests {
         assert!(state.previous_gray == previous, "copied without a growth");
         let (mut mask, mut accumulation) = (seeds.clone(), Image::filled(SIZE, 1.0f32));
         let counts = state.grow(
-            &GrowthFrame {
-                growth: &unbounded(),
-                config: &OcclusionConfig::default(),
-                intrinsics: &intrinsics(),
-                previous_from_current: &Isometry3::identity(),
-                depth_m: &depth(),
-                gray: &current,
-            },
+            &StillCamera::new().frame(&unbounded(), &depth(), &current),
             &mut mask,
             &mut accumulation,
             360,
@@ -1102,14 +1106,7 @@ mod tests {
             remember_frame(&mut state, &previous, &Image::filled(SIZE, 0));
             state
                 .grow(
-                    &GrowthFrame {
-                        growth: &growth,
-                        config: &OcclusionConfig::default(),
-                        intrinsics: &intrinsics(),
-                        previous_from_current: &Isometry3::identity(),
-                        depth_m: &depth(),
-                        gray: &current,
-                    },
+                    &StillCamera::new().frame(&growth, &depth(), &current),
                     &mut mask,
                     &mut accumulation,
                     SEED_X.len() * BOX_Y.len(),
@@ -1179,14 +1176,7 @@ mod tests {
             let mut state = AppearanceGrowth::new(SIZE);
             remember_frame(&mut state, &previous, &mask);
             let counts = state.grow(
-                &GrowthFrame {
-                    growth: &growth,
-                    config: &config,
-                    intrinsics: &intrinsics(),
-                    previous_from_current: &Isometry3::identity(),
-                    depth_m: &slanted,
-                    gray: &current,
-                },
+                &StillCamera::new().frame(&growth, &slanted, &current),
                 &mut mask,
                 &mut accumulation,
                 SEED_X.len() * BOX_Y.len(),
@@ -1247,20 +1237,12 @@ mod tests {
     fn nothing_happens_without_a_previous_image_or_objects() {
         let (_, current) = moved_pair(true, false);
         let mut state = AppearanceGrowth::new(SIZE);
-        let config = OcclusionConfig::default();
         let mut mask = Image::from_fn(SIZE, |x, y| if in_box(x, y) && x >= 94 { MASK_SET } else { 0 });
         let mut accumulation = Image::filled(SIZE, 0.0f32);
         let run = |state: &mut AppearanceGrowth, mask: &mut Mask, accumulation: &mut DepthMeters, pixels| {
             state
                 .grow(
-                    &GrowthFrame {
-                        growth: &unbounded(),
-                        config: &config,
-                        intrinsics: &intrinsics(),
-                        previous_from_current: &Isometry3::identity(),
-                        depth_m: &depth(),
-                        gray: &current,
-                    },
+                    &StillCamera::new().frame(&unbounded(), &depth(), &current),
                     mask,
                     accumulation,
                     pixels,
