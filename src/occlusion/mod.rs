@@ -488,7 +488,9 @@ impl OcclusionDetector {
         self.accumulation_m.fill(0.0);
         self.predicted.fill(0);
         self.mask.fill(0);
-        self.delta_z_m.fill(0.0);
+        if self.record_occlusion_map {
+            self.delta_z_m.fill(0.0);
+        }
         self.newly_discovered.fill(0);
         self.frames = 1;
         self.growth.remember(gray);
