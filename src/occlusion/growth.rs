@@ -597,6 +597,26 @@ impl AppearanceGrowth {
     }
 }
 
+/// How many frontier pixels ahead the rings prefetch. The rings wait on scattered loads: in a
+/// `perf` profile, a third of their samples sit on the depth, current and previous gray loads
+/// around the frontier. Distances 4 to 16 measured alike; 8 is in the middle.
+const RING_PREFETCH_DISTANCE: usize = 8;
+
+/// Hints the cache line holding `values[index]` into L1 (nothing when `index` is out of
+/// bounds, or off x86-64). Changes no result.
+#[inline(always)]
+fn prefetch<T>(values: &[T], index: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(value) = values.get(index) {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        // SAFETY: SSE is in the x86-64 baseline, and a prefetch of a valid address has no
+        // effect on memory.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(std::ptr::from_ref(value).cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (values, index);
+}
+
 /// The growth's buffers, borrowed apart from the images it reads.
 struct GrowthBuffers<'a> {
     looked_at: &'a mut Vec<u32>,
@@ -640,7 +660,20 @@ impl GrowthBuffers<'_> {
         let mut grown = 0;
         for _ in 0..growth.max_rings {
             self.next.clear();
-            for &f in self.frontier.iter() {
+            let frontier = &self.frontier[..];
+            for (i, &f) in frontier.iter().enumerate() {
+                // The rows a later (interior) frontier pixel's tests read: its 3×3
+                // neighbourhood in the depth and the current image, and the previous image
+                // there too (a warp moves a pixel by a few at most between frames; a wrong
+                // guess only costs the hint).
+                if let Some(&ahead) = frontier.get(i + RING_PREFETCH_DISTANCE) {
+                    let ahead = ahead as usize;
+                    for row_pixel in [ahead - width, ahead, ahead + width] {
+                        prefetch(z, row_pixel);
+                        prefetch(evidence.current, row_pixel);
+                        prefetch(evidence.previous, row_pixel);
+                    }
+                }
                 let f = f as usize;
                 let zf = z[f];
                 if zf <= 0.0 {
