@@ -662,10 +662,10 @@ impl GrowthBuffers<'_> {
             self.next.clear();
             let frontier = &self.frontier[..];
             for (i, &f) in frontier.iter().enumerate() {
-                // The rows a later (interior) frontier pixel's tests read: its 3×3
-                // neighbourhood in the depth and the current image, and the previous image
-                // there too (a warp moves a pixel by a few at most between frames; a wrong
-                // guess only costs the hint).
+                // What a later (interior) frontier pixel's tests read: the lines holding its
+                // column in the rows above, at and below, in the depth and the current image,
+                // and in the previous image too (a warp moves a pixel by a few at most between
+                // frames; a wrong guess only costs the hint).
                 if let Some(&ahead) = frontier.get(i + RING_PREFETCH_DISTANCE) {
                     let ahead = ahead as usize;
                     for row_pixel in [ahead - width, ahead, ahead + width] {
