@@ -286,9 +286,9 @@ pub struct OcclusionDetector {
     compensated_next_m: DepthMeters,
     accumulation_next_m: DepthMeters,
     predicted_carried: Image<u8>,
-    /// ΔZ of the latest frame, written only while `record_occlusion_map` is on.
-    delta_z_m: DepthMeters,
-    record_occlusion_map: bool,
+    /// ΔZ of the latest frame while it is recorded (`record_occlusion_map`): None otherwise, so
+    /// a detector that does not record it holds no buffer for it.
+    delta_z_m: Option<DepthMeters>,
     newly_discovered: Image<u8>,
     components: Components,
     /// Appearance-gated object completion state (previous gray image, growth buffers).
@@ -341,8 +341,7 @@ impl OcclusionDetector {
             compensated_next_m: depth(),
             accumulation_next_m: depth(),
             predicted_carried: Image::filled(size, 0),
-            delta_z_m: depth(),
-            record_occlusion_map: false,
+            delta_z_m: None,
             newly_discovered: Image::filled(size, 0),
             components: Components::new(size),
             growth: AppearanceGrowth::new(size),
@@ -393,19 +392,21 @@ impl OcclusionDetector {
     /// The occlusion map ΔZ of the latest frame (m), when recording it is on
     /// ([`OcclusionDetector::record_occlusion_map`]); None otherwise.
     pub fn occlusion_m(&self) -> Option<&DepthMeters> {
-        self.record_occlusion_map.then_some(&self.delta_z_m)
+        self.delta_z_m.as_ref()
     }
 
     /// Keep the occlusion map ΔZ of every frame for [`OcclusionDetector::occlusion_m`] (off by
     /// default). ΔZ feeds nothing after the accumulation, so the detector does not write it out
     /// unless asked: one image fewer to write per frame (≈ 5 % of the update at 640×480).
-    /// Masks, A and statistics do not change either way.
+    /// Masks, A and statistics do not change either way. Switching it on allocates the map (one
+    /// image, cleared); switching it off frees it.
     pub fn record_occlusion_map(&mut self, on: bool) {
-        if on && !self.record_occlusion_map {
+        match (on, &self.delta_z_m) {
             // Until the next update, ΔZ is that of no frame at all.
-            self.delta_z_m.fill(0.0);
+            (true, None) => self.delta_z_m = Some(Image::filled(self.size, 0.0)),
+            (false, Some(_)) => self.delta_z_m = None,
+            _ => {}
         }
-        self.record_occlusion_map = on;
     }
 
     /// Newly discovered area Ñ of the latest frame (0 / 1).
@@ -488,8 +489,8 @@ impl OcclusionDetector {
         self.accumulation_m.fill(0.0);
         self.predicted.fill(0);
         self.mask.fill(0);
-        if self.record_occlusion_map {
-            self.delta_z_m.fill(0.0);
+        if let Some(delta_z_m) = &mut self.delta_z_m {
+            delta_z_m.fill(0.0);
         }
         self.newly_discovered.fill(0);
         self.frames = 1;
@@ -519,11 +520,7 @@ impl OcclusionDetector {
             compensated_m: &mut self.compensated_next_m,
             accumulation_m: &mut self.accumulation_next_m,
             predicted_carried: &mut self.predicted_carried,
-            delta_z_m: if self.record_occlusion_map {
-                Some(&mut self.delta_z_m)
-            } else {
-                None
-            },
+            delta_z_m: self.delta_z_m.as_mut(),
             newly_discovered: &mut self.newly_discovered,
             object_set: self.components.object_set_mut(),
         };

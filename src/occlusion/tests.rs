@@ -751,4 +751,6 @@ fn the_occlusion_map_is_kept_only_on_request_and_changes_nothing_else() {
         occluded_frames += usize::from(delta_z.as_slice().iter().any(|&dz| dz > 0.1));
     }
     assert!(occluded_frames > 10, "{occluded_frames}");
+    recording.record_occlusion_map(false);
+    assert!(recording.occlusion_m().is_none(), "switched off: no map kept");
 }
