@@ -68,11 +68,7 @@ fn bench(c: &mut Criterion) {
             size: lv.size(),
             intrinsics: lv.intrinsics,
         };
-        let cost = residuals::CostParams {
-            k_intensity: config.k_intensity.at_level(level),
-            k_depth_m: config.k_depth_m,
-            depth_weight: config.depth_weight_gamma,
-        };
+        let cost = config.cost_at_level(level);
         let points = estimator.reference_points(level);
         group.bench_function(format!("lm_iteration_level{level}_{}pts", points.len()), |b| {
             b.iter(|| {

@@ -76,11 +76,7 @@ fn per_level(
                     size: lv.size(),
                     intrinsics: lv.intrinsics,
                 };
-                let cost = residuals::CostParams {
-                    k_intensity: cfg.k_intensity.at_level(l),
-                    k_depth_m: cfg.k_depth_m,
-                    depth_weight: cfg.depth_weight_gamma,
-                };
+                let cost = cfg.cost_at_level(l);
                 let schedule = LmSchedule {
                     lambda_initial: cfg.lm_lambda_initial,
                     lambda_up: cfg.lm_lambda_up,
@@ -98,6 +94,7 @@ fn per_level(
                     &target,
                     &cost,
                     &schedule,
+                    None,
                     &mut level_pose,
                 );
                 let tot = &mut totals[l];
@@ -168,7 +165,7 @@ fn main() {
     let sequence = SyntheticSequence::new(Scenario::DominantObject, config);
     let synthetic: Vec<_> = (40..70).map(|i| sequence.frame(i)).collect();
     let processor_config = ProcessorConfig {
-        pose_source: PoseSource::DvoClosedLoop(DvoConfig::default()),
+        pose_source: PoseSource::DvoClosedLoop,
         ..ProcessorConfig::default()
     };
     let mut processor = Processor::new(size, config.intrinsics(), processor_config).unwrap();
@@ -185,6 +182,7 @@ fn main() {
                     gray: &f.gray,
                     depth_m: &f.depth_m,
                     world_from_marker: Some(&f.world_from_camera),
+                    ignore_in_previous: None,
                 })
                 .unwrap();
             masks[k] = Some(out.mask.clone());

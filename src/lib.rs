@@ -23,6 +23,7 @@ pub mod occlusion;
 pub mod pipeline;
 pub mod process;
 pub mod pyramid;
+pub(crate) mod serde_util;
 pub mod synthetic;
 pub mod time;
 pub mod trajectory;

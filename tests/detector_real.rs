@@ -186,6 +186,7 @@ fn tum_fr2_desk_static_with_dvo_poses_has_few_false_positives() {
                 gray: &gray,
                 depth_m: &depth,
                 world_from_marker: None,
+                ignore_in_previous: None,
             })
             .unwrap();
         failures += usize::from(

@@ -98,6 +98,7 @@ fn run(
                 gray: &frame.gray,
                 depth_m: &frame.depth_m,
                 world_from_marker: None,
+                ignore_in_previous: None,
             })
             .unwrap();
         assert!(

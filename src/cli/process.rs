@@ -16,6 +16,7 @@ use occmask::mcap_io::annotate::AnnotateOptions;
 use occmask::mcap_io::input::detect::TopicOverrides;
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::AtomicOutput;
+use occmask::pipeline::{ProcessingMode, ProcessorConfig};
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::{
     process_file, OdometryAnchor, PipelineOptions, PoseMode, ProcessConfig, ProcessHooks, ProcessReport,
@@ -54,11 +55,16 @@ pub enum PoseArg {
 #[command(after_help = AFTER_HELP)]
 pub struct ProcessArgs {
     /// Input MCAP files (never modified).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "print_config")]
     pub inputs: Vec<PathBuf>,
 
     /// Output file (one input only).
-    #[arg(short, long, conflicts_with = "out_dir", required_unless_present = "out_dir")]
+    #[arg(
+        short,
+        long,
+        conflicts_with = "out_dir",
+        required_unless_present_any = ["out_dir", "print_config"]
+    )]
     pub output: Option<PathBuf>,
 
     /// Output folder: each input X.mcap becomes DIR/X.occmask.mcap.
@@ -87,6 +93,24 @@ pub struct ProcessArgs {
     /// `world` is the first processed camera, even when the file has /groundtruth/pose.
     #[arg(long)]
     pub no_anchor: bool,
+
+    /// Causal processing: one forward pass, each frame's result from it and the frames before
+    /// (what an online system gets). The default offline mode adds a backward pass and a
+    /// refinement pass over a look-ahead of 90 frames, and finds moving objects earlier and
+    /// more completely.
+    #[arg(long)]
+    pub causal: bool,
+
+    /// DVO, detector and failure-policy parameters from a JSON file: any subset of the fields
+    /// `--print-config` prints (the others keep their defaults). Flags such as
+    /// --no-appearance-growth apply on top. Recorded in the output's occmask.process metadata.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+
+    /// Print every DVO, detector and failure-policy parameter with its default value, as the
+    /// JSON that --config reads, and exit.
+    #[arg(long, exclusive = true)]
+    pub print_config: bool,
 
     /// The paper's detector: no appearance-gated object completion (which completes objects
     /// that start moving, at ~1.5 ms per 640×480 frame with a large object in view).
@@ -253,6 +277,30 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
             bail!("--end must be after --start");
         }
     }
+    let mut processor = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read --config {}", path.display()))?;
+            serde_json::from_str::<ProcessorConfig>(&text).with_context(|| {
+                format!(
+                    "--config {}: not a valid configuration (`occmask process --print-config` \
+                     prints every field with its default)",
+                    path.display()
+                )
+            })?
+        }
+        None => ProcessorConfig::default(),
+    };
+    if args.no_appearance_growth {
+        processor.occlusion.appearance_growth = None;
+    }
+    if args.causal {
+        processor.mode = ProcessingMode::Causal;
+    }
+    processor.validate().with_context(|| match &args.config {
+        Some(path) => format!("--config {}", path.display()),
+        None => "the detector and DVO parameters".to_owned(),
+    })?;
     Ok(ProcessConfig {
         topics: TopicOverrides {
             rgb: args.rgb_topic.clone(),
@@ -280,6 +328,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
             write: args.write.options(),
             ..Default::default()
         },
+        processor,
     })
 }
 
@@ -401,7 +450,6 @@ fn run_one(
     }
     let mut factory = occmask::process::pipeline_factory(PipelineOptions {
         keep_accumulation: args.accumulation,
-        appearance_growth: !args.no_appearance_growth,
     });
     let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
         .with_context(|| {
@@ -445,6 +493,11 @@ fn style(template: &str) -> ProgressStyle {
 /// Usage errors before anything runs; "N of M files failed" after the summary when any
 /// file failed (the others are still written).
 pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
+    if args.print_config {
+        let text = serde_json::to_string_pretty(&ProcessorConfig::default())?;
+        println!("{text}");
+        return Ok(Outcome::Success);
+    }
     let jobs = plan(&args)?;
     let config = config(&args)?;
     let all_inputs: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();

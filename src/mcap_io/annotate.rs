@@ -74,6 +74,9 @@ pub const METADATA_PROCESS: &str = "occmask.process";
 /// Key in [`METADATA_PROCESS`]: the pose channel whose frame `world` is (the odometry starts at
 /// that channel's pose); absent when `world` is the first processed camera.
 pub const METADATA_ODOMETRY_ANCHOR: &str = "odometry_anchor_topic";
+/// Key in [`METADATA_PROCESS`]: the DVO, detector and failure-policy parameters used, as the
+/// JSON that `occmask process --config` reads.
+pub const METADATA_PROCESSOR_CONFIG: &str = "processor_config";
 
 /// The path is published at most this often (data time): enough for a live-looking
 /// trajectory without one message per frame.

@@ -37,7 +37,8 @@ use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, MASK_SET};
 
 /// Parameters of appearance-gated object completion ([`OcclusionConfig::appearance_growth`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct AppearanceGrowthConfig {
     /// A pixel must change by more than this much gray (0..1 scale) against the previous image
     /// warped with the camera motion to be grown into.

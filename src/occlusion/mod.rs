@@ -42,6 +42,7 @@ pub mod transport;
 use std::time::Instant;
 
 use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
@@ -55,7 +56,8 @@ use growth::{AppearanceGrowth, GrowthFrame};
 use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch};
 
 /// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum ThresholdForm {
     /// τ = coefficient · Z (the authors' release; coefficients in m/m, i.e. unitless).
     #[default]
@@ -66,7 +68,8 @@ pub enum ThresholdForm {
 
 /// Which depth back-projects a current pixel for the warp, and what ΔZ compares
 /// (algorithm.md §9-Q3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum WarpDepth {
     /// The release: back-project pixel u with the previous compensated depth Zc_i(u) and compare
     /// raw depths, ΔZ = Zc_i(n(u)) − Zc_{i+1}(u).
@@ -79,7 +82,8 @@ pub enum WarpDepth {
 }
 
 /// Adjacency used by the pruning test of predicted areas (algorithm.md §5.3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Adjacency {
     /// Left, right, up, down (the release's stencil intent).
     #[default]
@@ -89,7 +93,11 @@ pub enum Adjacency {
 }
 
 /// Every parameter of the detector, with the release defaults (algorithm.md §2).
-#[derive(Debug, Clone, Copy, PartialEq)]
+///
+/// Serialised (JSON config files) field by field with these names; missing fields take the
+/// default, unknown ones are an error; `null` switches an optional stage off.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct OcclusionConfig {
     /// α of τ_α: accumulation below τ_α is not an object (unitless for linear, 1/m for quadratic).
     pub alpha: f32,
@@ -97,6 +105,11 @@ pub struct OcclusionConfig {
     pub beta: f32,
     /// Linear (release) or quadratic (paper) thresholds.
     pub threshold_form: ThresholdForm,
+    /// Fraction of an accumulation at or below τ_α kept for the next frame (0 = the paper's
+    /// truncation, Eq. 5, which clears it). Above 0 the accumulation is leaky: a slow, steady
+    /// depth decrease (an object approaching head-on) adds up over frames instead of being
+    /// cleared every frame, while noise decays. Values in [0, 1).
+    pub sub_threshold_retention: f32,
     /// Minimum object component size at 640 × 480 in pixels; scaled by image area (§9-Q13).
     pub min_object_pixels_vga: usize,
     /// Prediction only crosses 4-neighbour edges whose depth step is below this (m).
@@ -142,6 +155,7 @@ impl Default for OcclusionConfig {
             alpha: 0.15,
             beta: 0.225,
             threshold_form: ThresholdForm::Linear,
+            sub_threshold_retention: 0.0,
             min_object_pixels_vga: 500,
             prediction_depth_gate_m: 0.05,
             prediction_stop_terms: 10,
@@ -201,6 +215,13 @@ impl OcclusionConfig {
         positive("alpha", self.alpha)?;
         positive("beta", self.beta)?;
         positive("prediction_depth_gate_m", self.prediction_depth_gate_m)?;
+        if !(0.0..1.0).contains(&self.sub_threshold_retention) {
+            return Err(Error::InvalidParameter {
+                name: "sub_threshold_retention",
+                value: self.sub_threshold_retention.to_string(),
+                expected: "a fraction in [0, 1)".into(),
+            });
+        }
         if let Some(margin) = self.motion_check_margin {
             positive("motion_check_margin", margin)?;
         }

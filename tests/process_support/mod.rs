@@ -499,6 +499,12 @@ pub struct TestProcessor {
 }
 
 impl FrameProcessor for TestProcessor {
+    fn push(&mut self, frame: &RgbdFrame<'_>) -> Result<Vec<ProcessedFrame>> {
+        self.process(frame).map(|result| vec![result])
+    }
+}
+
+impl TestProcessor {
     fn process(&mut self, frame: &RgbdFrame<'_>) -> Result<ProcessedFrame> {
         let size = frame.gray.size();
         let mask = match &self.previous {
@@ -543,6 +549,7 @@ pub fn test_factory(
     intrinsics: PinholeIntrinsics,
     _size: ImageSize,
     _mode: PoseMode,
+    _config: &occmask::pipeline::ProcessorConfig,
 ) -> Result<Box<dyn FrameProcessor>> {
     Ok(Box::new(TestProcessor {
         previous: None,
