@@ -2,6 +2,7 @@
 //! (algorithm.md §7.1, §9-Q11) and trajectory errors (RPE with TUM `evaluate_rpe` semantics,
 //! ATE after rigid alignment, §7.2).
 
+pub mod free_space;
 pub mod segmentation;
 pub mod trajectory;
 
