@@ -1047,7 +1047,12 @@ fn assert_interrupted(name: &str, out: &Output, cwd: &Path, keep: &[&str]) {
 #[test]
 fn interrupted_runs_leave_nothing_and_rerun_identically() {
     use std::time::Duration;
-    let desk = common::shared_data("tum_fr2_desk_50");
+    let Some(desk) = common::real_data(
+        "tum_fr2_desk_50",
+        "bad_inputs::interrupted_runs_leave_nothing_and_rerun_identically",
+    ) else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     // Each run happens in its own directory with the same relative output name, so the
     // command lines (recorded in convert's metadata) are identical.

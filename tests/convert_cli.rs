@@ -449,7 +449,12 @@ fn larr_variants_underscore_dir_and_no_association() {
 
 #[test]
 fn jpeg_colour_passes_through_unchanged() {
-    let src = shared_data("7scenes_redkitchen_300");
+    let Some(src) = real_data(
+        "7scenes_redkitchen_300",
+        "convert_cli::jpeg_colour_passes_through_unchanged",
+    ) else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     // A 5-frame TUM-layout view of the (non-redistributable) sequence, built in the temp dir.
     let dir = tmp.path().join("kitchen");
@@ -509,7 +514,12 @@ fn icsl_uses_millimetres_and_the_icsl_camera() {
 #[test]
 fn ctrl_c_stops_cleanly_without_leaving_files() {
     use std::time::{Duration, Instant};
-    let src = shared_data("7scenes_redkitchen_300");
+    let Some(src) = real_data(
+        "7scenes_redkitchen_300",
+        "convert_cli::ctrl_c_stops_cleanly_without_leaving_files",
+    ) else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     let out_path = tmp.path().join("out.mcap");
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))

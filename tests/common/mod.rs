@@ -5,6 +5,9 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod data;
+pub use data::*;
+
 /// The repository root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -17,17 +20,6 @@ pub fn larr_fixture() -> PathBuf {
 
 /// TUM fr2 intrinsics at pyramid level 2, matching the 160×120 fixture.
 pub const FIXTURE_CAMERA: &str = "130.225,130.25,80.9,62.05";
-
-/// A shared real sequence (../shared/data/<name>); panics with a clear message when absent.
-pub fn shared_data(name: &str) -> PathBuf {
-    let path = repo().join("../shared/data").join(name);
-    assert!(
-        path.is_dir(),
-        "test data {} is missing: CI clones the repository with shared/ beside it",
-        path.display()
-    );
-    path
-}
 
 /// Runs `occmask` with `args`.
 pub fn occmask<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
