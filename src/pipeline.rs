@@ -1,9 +1,10 @@
 //! Per-sequence processing: camera motion (DVO or an external pose) + occlusion-accumulation
-//! moving-object masks, frame by frame (algorithm.md §1).
+//! moving-object masks, frame by frame (docs/method.md).
 //!
 //! A [`Processor`] owns the pose source's state (a [`DvoTracker`] or the last external pose), the
-//! [`OcclusionDetector`] and every scratch buffer, so [`Processor::process`] allocates nothing
-//! after the first frame. Frames must be given in time order.
+//! [`OcclusionDetector`] and every scratch buffer, so with external poses [`Processor::process`]
+//! allocates nothing after the first frame (`tests/detector_alloc.rs`); with DVO poses the
+//! tracker still allocates now and then. Frames must be given in time order.
 //!
 //! Pose sources ([`PoseSource`]):
 //! * [`PoseSource::DvoClosedLoop`]: the paper's loop. DVO estimates `current_from_previous` with

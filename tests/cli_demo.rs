@@ -95,3 +95,34 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         .unwrap();
     assert_eq!(again.status.code(), Some(1));
 }
+
+/// `occmask demo | head` with the reader already gone: the demo still writes its file, then
+/// ends on SIGPIPE like any filter when it prints, with no panic message.
+#[cfg(unix)]
+#[test]
+fn demo_into_a_closed_pipe_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let output = dir.path().join("demo.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(["demo", "--width", "160", "--output"])
+        .arg(&output)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(
+        out.status.signal(),
+        Some(libc::SIGPIPE),
+        "{:?}: {err}",
+        out.status
+    );
+    assert!(
+        output.is_file(),
+        "the demo's file is written before anything is printed"
+    );
+}

@@ -129,6 +129,17 @@ fn usage_errors_exit_2() {
         let out = convert("tum", &c.dir, &c.out, extra);
         assert_eq!(out.status.code(), Some(2), "{extra:?}: {}", stderr(&out));
     }
+    // Numbers out of range name the flag and the range (1e300 ms once saturated silently).
+    for (extra, range) in [
+        (["--max-pair-gap-ms", "1e300"], "from 0 to 60000"),
+        (["--max-pair-gap-ms", "inf"], "from 0 to 60000"),
+        (["--chunk-size-mib", "1e300"], "at most 1024"),
+    ] {
+        let out = convert("tum", &c.dir, &c.out, &extra);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(extra[0]) && err.contains(range), "{extra:?}: {err}");
+    }
     assert_eq!(occmask(&["convert", "tum"]).status.code(), Some(2));
     assert!(!c.out.exists());
 }

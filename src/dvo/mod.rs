@@ -11,8 +11,9 @@
 //!   `current_from_reference`, mapping reference-camera points into the current camera;
 //!   chain it into poses with [`crate::trajectory::chain`].
 //!
-//! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and
-//! allocates nothing per frame), or [`DvoEstimator`] on two explicitly built pyramids.
+//! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and allocates
+//! its pyramids and scratch once; `track` still allocates now and then, as
+//! `tests/detector_alloc.rs` notes), or [`DvoEstimator`] on two explicitly built pyramids.
 //!
 //! # Example
 //! ```
@@ -792,9 +793,10 @@ fn missing_level(level: usize) -> Error {
 
 /// Frame-to-frame DVO over a sequence: keeps the previous frame's pyramid as the reference.
 ///
-/// Everything is allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds the new
-/// frame's pyramid once, estimates the motion from the previous frame, then swaps the two
-/// pyramids (no copy, no allocation).
+/// The pyramids and scratch are allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds
+/// the new frame's pyramid once, estimates the motion from the previous frame, then swaps the
+/// two pyramids (no copy). `track` is not free of allocations: it makes a few now and then
+/// (counted in `tests/detector_alloc.rs`).
 #[derive(Debug, Clone)]
 pub struct DvoTracker {
     estimator: DvoEstimator,
