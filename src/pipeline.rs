@@ -15,7 +15,7 @@
 //!   `world_from_camera = world_from_marker · marker_from_camera`, with the optional fixed
 //!   `camera_from_marker` calibration for markers that are not at the optical centre.
 //!
-//! # Failure modes (issue 6)
+//! # Failure modes
 //!
 //! Every frame gets a [`PoseOutcome`] and the pipeline never outputs NaN (poses, masks, the A
 //! map and statistics are finite whatever the input). Per frame, in order:

@@ -1220,7 +1220,7 @@ impl Default for PipelineOptions {
 }
 
 impl PipelineProcessor {
-    /// A pipeline for `mode` with default DVO and detector parameters (algorithm.md §2) and
+    /// A pipeline for `mode` with default DVO and detector parameters (docs/method.md) and
     /// the given options.
     ///
     /// # Errors
