@@ -22,6 +22,8 @@ use occmask::image_buf::ImageSize;
 use process_support::{fixture_bytes, FixtureSpec, Flavor, FRAME_NS, T0_NS};
 use prost::Message as _;
 
+#[cfg(unix)]
+use common::assert_ends_quietly_on_a_closed_pipe;
 use common::{entries, occmask, stderr, tum_from_fixture};
 
 /// Big enough for the DVO pyramid, small enough to be quick (8 frames).
@@ -855,25 +857,9 @@ fn eval_bad_inputs() {
     // no panic message. Also as --json.
     #[cfg(unix)]
     for json in [false, true] {
-        use std::os::unix::process::ExitStatusExt;
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))
-            .arg("eval")
-            .args([&full, &full, &full])
-            .args(json.then_some("--json"))
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        drop(child.stdout.take());
-        let out = child.wait_with_output().unwrap();
-        let err = stderr(&out);
-        assert!(!err.contains("panicked"), "json {json}: {err}");
-        assert_eq!(
-            out.status.signal(),
-            Some(libc::SIGPIPE),
-            "json {json}: {:?}: {err}",
-            out.status
-        );
+        let mut args = os(&[&"eval", &full, &full, &full]);
+        args.extend(json.then(|| OsString::from("--json")));
+        assert_ends_quietly_on_a_closed_pipe(&args, &format!("eval, json {json}"));
     }
 }
 

@@ -2,6 +2,8 @@
 //! convert channels plus every channel `occmask process` adds; no temporary file left behind.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::process::Command;
 
@@ -101,26 +103,16 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
 #[cfg(unix)]
 #[test]
 fn demo_into_a_closed_pipe_ends_quietly() {
-    use std::os::unix::process::ExitStatusExt;
     let dir = tempfile::tempdir().unwrap();
     let output = dir.path().join("demo.mcap");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_occmask"))
-        .args(["demo", "--width", "160", "--output"])
-        .arg(&output)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    drop(child.stdout.take());
-    let out = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!err.contains("panicked"), "{err}");
-    assert_eq!(
-        out.status.signal(),
-        Some(libc::SIGPIPE),
-        "{:?}: {err}",
-        out.status
-    );
+    let args = [
+        "demo".as_ref(),
+        "--width".as_ref(),
+        "160".as_ref(),
+        "--output".as_ref(),
+        output.as_os_str(),
+    ];
+    common::assert_ends_quietly_on_a_closed_pipe(&args, "demo");
     assert!(
         output.is_file(),
         "the demo's file is written before anything is printed"
