@@ -1,5 +1,5 @@
 //! Detector + DVO per frame (the closed loop of `pipeline::Processor`) on the synthetic
-//! dominant-object sequence at 640×480. Target (issue 4): ≥ 50 frames per second.
+//! dominant-object sequence at 640×480. Target: ≥ 50 frames per second.
 //! Run: `cargo bench --bench pipeline` (add `-- --quick` for a short run).
 
 // A benchmark's setup failing is a bug in the benchmark: panicking is the right report.

@@ -1,6 +1,6 @@
 //! Writes synthetic RGB-D scenarios (src/synthetic.rs: exact ground-truth masks and poses) as
 //! MCAP files in `occmask convert`'s layout, so `occmask process` + `occmask eval` can be scored
-//! on sequences with moving objects (no real one is available; see ../shared/data/INDEX.txt).
+//! on sequences with moving objects and exact ground-truth masks (no real sequence here has them).
 //!
 //! usage: cargo run --release --example synthetic_mcap -- OUT_DIR [SCENARIO...]
 //! (default: every scenario; files are OUT_DIR/<scenario>.mcap, 640×480)

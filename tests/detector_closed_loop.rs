@@ -1,5 +1,5 @@
 //! The paper's closed loop on the synthetic scenarios at 640×480: DVO estimates the motion with
-//! the previous mask as its ignore mask, the detector uses that motion (issue 4 "How good":
+//! the previous mask as its ignore mask, the detector uses that motion (targets:
 //! mean F1 ≥ 0.85 per scenario; static control ≤ 0.5 % false positives per frame after 5
 //! frames; on the dominant-object scenario the closed loop has ≥ 2× lower RPE than unmasked DVO).
 //!

@@ -1,9 +1,10 @@
 //! The detector on real static sequences (nothing moves): the false-positive pixel fraction with
-//! ground-truth poses must stay ≤ 1 % per frame after a warm-up (issue 4 "How good").
+//! ground-truth poses must stay ≤ 1 % per frame after a warm-up.
 //!
-//! Data: `../shared/data` beside the repository (TUM fr2_desk 50 frames, 7-Scenes redkitchen 300
-//! frames). Tests skip with a message when the data is absent. 7-Scenes colour and depth are not
-//! registered, so only its depth is used.
+//! Data: the real-data folder (`OCCMASK_DATA`, default `../shared/data` beside the repository:
+//! TUM fr2_desk 50 frames, 7-Scenes redkitchen 300 frames). Tests skip with a notice when the
+//! data is absent (and fail when `OCCMASK_DATA` names a folder without it). 7-Scenes colour and
+//! depth are not registered, so only its depth is used.
 //!
 //! Each ground truth has one frame whose motion disagrees with the depth (TUM frame 5,
 //! 7-Scenes frame 122: the depth fits no motion better than the ground-truth one); the
@@ -27,17 +28,8 @@ const WARM_UP_FRAMES: usize = 5;
 /// Largest gap between bracketing ground-truth poses for interpolation (TUM mocap is ~100 Hz).
 const MAX_GT_GAP_NS: u64 = 50_000_000;
 
-fn data_dir(name: &str) -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(name);
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipping: {} not found", dir.display());
-        None
-    }
-}
+#[path = "common/data.rs"]
+mod data;
 
 fn list(dir: &Path, file: &str) -> Vec<(u64, PathBuf)> {
     std::fs::read_to_string(dir.join(file))
@@ -133,7 +125,10 @@ fn check(name: &str, fractions: &[f64], limit: f64) {
 
 #[test]
 fn tum_fr2_desk_static_with_ground_truth_poses_has_few_false_positives() {
-    let Some(dir) = data_dir("tum_fr2_desk_50") else {
+    let Some(dir) = data::real_data(
+        "tum_fr2_desk_50",
+        "detector_real::tum_fr2_desk_static_with_ground_truth_poses_has_few_false_positives",
+    ) else {
         return;
     };
     let (fractions, rejected) =
@@ -145,10 +140,13 @@ fn tum_fr2_desk_static_with_ground_truth_poses_has_few_false_positives() {
 
 /// Measured 0 % on every frame (2.23 % max on 24 frames before the motion check: bands along
 /// every depth edge left by frame 122's ground-truth motion, which fits the depth worse than no
-/// motion at all, README "Accuracy").
+/// motion at all, docs/accuracy.md).
 #[test]
 fn seven_scenes_redkitchen_static_with_ground_truth_poses_has_few_false_positives() {
-    let Some(dir) = data_dir("7scenes_redkitchen_300") else {
+    let Some(dir) = data::real_data(
+        "7scenes_redkitchen_300",
+        "detector_real::seven_scenes_redkitchen_static_with_ground_truth_poses_has_few_false_positives",
+    ) else {
         return;
     };
     let (fractions, rejected) =
@@ -166,7 +164,10 @@ fn seven_scenes_redkitchen_static_with_ground_truth_poses_has_few_false_positive
 /// so DVO can run. Reported alongside the ground-truth-pose figure.
 #[test]
 fn tum_fr2_desk_static_with_dvo_poses_has_few_false_positives() {
-    let Some(dir) = data_dir("tum_fr2_desk_50") else {
+    let Some(dir) = data::real_data(
+        "tum_fr2_desk_50",
+        "detector_real::tum_fr2_desk_static_with_dvo_poses_has_few_false_positives",
+    ) else {
         return;
     };
     let rgb_files = list(&dir, "rgb.txt");

@@ -1,9 +1,9 @@
 //! Detector accuracy on every synthetic scenario at 640×480 with the true (external) camera
-//! motion (issue 4 "How good": mean F1 ≥ 0.90 per scenario; static control false-positive
+//! motion (targets: mean F1 ≥ 0.90 per scenario; static control false-positive
 //! fraction ≤ 0.5 % per frame after the first 5 frames). Default `OcclusionConfig`.
 //!
 //! One scenario (still, then moving) reaches the 0.90 target only with appearance-gated object
-//! completion, which the default config enables (see README "Moving-object detection").
+//! completion, which the default config enables (see docs/method.md, "Deviations").
 #![allow(clippy::unwrap_used)]
 
 use occmask::image_buf::ImageSize;
@@ -98,7 +98,7 @@ fn entering_while_panning() {
 
 /// A box that stood still is background; when it starts moving only the parts leaving its old
 /// footprint occlude anything (the paper's method alone: frames 31–47 ramp recall 0.04 → 0.91,
-/// mean F1 0.839, README "Accuracy"). Appearance-gated object completion
+/// mean F1 0.839, docs/accuracy.md). Appearance-gated object completion
 /// (`OcclusionConfig::appearance_growth`) grows the detected strip over the rest of the moving,
 /// textured box (measured 0.901). While it leaves the view at the right border (frames 85–87)
 /// its visible remainder lies entirely in once-predicted area: it must stay detected

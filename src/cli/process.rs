@@ -25,7 +25,7 @@ use occmask::process::{
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
 
-use super::options::{parse_at_least_one, parse_camera_arg, parse_non_negative, parse_positive, WriteArgs};
+use super::options::{parse_at_least_one, parse_camera_arg, parse_pair_gap_ms, parse_positive, WriteArgs};
 use super::{Globals, Outcome};
 
 const AFTER_HELP: &str = "\
@@ -147,7 +147,7 @@ pub struct ProcessArgs {
     pub end: Option<u64>,
 
     /// Largest colour/depth stamp difference of a pair, milliseconds.
-    #[arg(long, value_parser = parse_non_negative, default_value_t = DEFAULT_PAIR_TOLERANCE_NS as f64 / 1e6)]
+    #[arg(long, value_parser = parse_pair_gap_ms, default_value_t = DEFAULT_PAIR_TOLERANCE_NS as f64 / 1e6)]
     pub max_pair_gap_ms: f64,
 
     /// Write only the new channels (open it together with the input in Foxglove).
@@ -529,9 +529,9 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         }
     }
 
-    // Each file in flight runs its pipeline on a rayon pool of its own share of the cores
-    // (issue 5: "rayon across files, each file sequential inside" once there are as many files
-    // as cores); the output bytes do not depend on the split.
+    // Each file in flight runs its pipeline on a rayon pool of its own share of the cores (so
+    // with as many files as cores each file runs sequentially inside); the output bytes do not
+    // depend on the split.
     let budget = ThreadBudget::new(available_cores(), jobs.len(), args.jobs, args.threads_per_file)
         .context("--jobs/--threads-per-file")?;
     let results = run_batch(jobs.len(), &budget, |i| {
@@ -585,9 +585,23 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     if failed > 0 {
         bail!("{failed} of {} files failed", results.len());
     }
+    // A truncated input whose messages (not only its index) were cut off: every file was
+    // written from what could be read, and exit code 3 says that input was lost.
+    if results
+        .iter()
+        .any(|r| matches!(&r.outcome, Ok((rep, _)) if lost_input(rep)))
+    {
+        return Ok(Outcome::DataLoss);
+    }
     // Unpaired frames and frames outside the pose stream are reported in the summary, not an
     // error: colour and depth often run at different rates, and every input message is copied.
     Ok(Outcome::Success)
+}
+
+/// True when the input was truncated inside its messages (a cut after the data section loses
+/// only the index, which the reader rebuilds).
+fn lost_input(rep: &ProcessReport) -> bool {
+    rep.input_truncated && !rep.input_truncation.is_some_and(|t| t.messages_intact)
 }
 
 /// One line per problem of a file that was still processed: a truncated input (what was

@@ -1,6 +1,6 @@
 //! Robust dense visual odometry (DVO) between consecutive RGB-D frames that ignores masked
 //! (moving) pixels of the reference frame: the "Robust DVO" of Kim, Kim & Kim (ICRA 2020)
-//! built as algorithm.md §4.5 recommends.
+//! without the authors' release's bugs (docs/method.md, "Dense visual odometry").
 //!
 //! - Cost: Σ ρ_{k_I}(r_I) + γ·Σ ρ_{k_Z}(r_Z) over reference pixels with valid depth that are not
 //!   ignored; r_I photometric, r_Z = Z_cur(w) − z′ against the transformed depth; ρ bi-square
@@ -11,8 +11,9 @@
 //!   `current_from_reference`, mapping reference-camera points into the current camera;
 //!   chain it into poses with [`crate::trajectory::chain`].
 //!
-//! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and
-//! allocates nothing per frame), or [`DvoEstimator`] on two explicitly built pyramids.
+//! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and allocates
+//! its pyramids and scratch once; `track` still allocates now and then, as
+//! `tests/detector_alloc.rs` notes), or [`DvoEstimator`] on two explicitly built pyramids.
 //!
 //! # Example
 //! ```
@@ -54,7 +55,7 @@ use solver::{LevelError, LevelStop, LmSchedule};
 /// [`DvoEstimate`]; 640×480 has 7 levels of at least 8×8 pixels).
 pub const MAX_DVO_LEVELS: usize = 8;
 
-/// Default initial LM damping λ₀ (relative to diag H). The release uses 0.1 (algorithm.md §2),
+/// Default initial LM damping λ₀ (relative to diag H). The release uses 0.1 (docs/method.md),
 /// but Marquardt damping λ·diag H shrinks the step along H's weakest eigen-direction by
 /// ≈ μ_min / (λ·d): on a distant, nearly fronto-parallel scene the x-translation / yaw valley
 /// has μ_min / d ≈ 1e-4, so with λ₀ = 0.1 (divided by only 1.5 per accepted step) the solver
@@ -183,7 +184,7 @@ pub struct DvoConfig {
     /// [`crate::pyramid::MIN_LEVEL_SIDE_PX`] ([`Self::levels_for`]). Default [`DEFAULT_LEVELS`].
     pub levels: usize,
     /// The finest level the solver runs on (0 = full resolution). Default 1 (320×240 for VGA):
-    /// see the README's DVO performance section for what level 0 costs and buys.
+    /// see docs/method.md ("Dense visual odometry") for what level 0 costs and buys.
     pub finest_level: usize,
     /// LM candidate evaluations per level at most.
     pub max_iterations_per_level: usize,
@@ -241,8 +242,8 @@ impl Default for DvoConfig {
 
 impl DvoConfig {
     /// The paper's weights (k_I 48/255, k_Z 0.5 m, γ 0.001) with the release's LM schedule
-    /// (×3 on rejection, ÷1.5 on acceptance, stop > 200, ≤ 40 iterations; algorithm.md
-    /// §2 / §9 Q6–Q8) except λ₀ = [`LM_LAMBDA_INITIAL`] instead of 0.1 and 5 levels instead of 4
+    /// (×3 on rejection, ÷1.5 on acceptance, stop > 200, ≤ 40 iterations; docs/method.md)
+    /// except λ₀ = [`LM_LAMBDA_INITIAL`] instead of 0.1 and 5 levels instead of 4
     /// ([`DEFAULT_LEVELS`]; both measured, see there).
     pub fn paper() -> Self {
         Self {
@@ -283,7 +284,7 @@ impl DvoConfig {
         }
     }
 
-    /// The Matlab release's weights: k_I level schedule, k_Z 0.25 m, γ 0.01 (algorithm.md §2).
+    /// The Matlab release's weights: k_I level schedule, k_Z 0.25 m, γ 0.01 (docs/method.md).
     pub fn release() -> Self {
         Self {
             k_intensity: IntensityThreshold::ReleaseSchedule,
@@ -921,9 +922,10 @@ fn missing_level(level: usize) -> Error {
 
 /// Frame-to-frame DVO over a sequence: keeps the previous frame's pyramid as the reference.
 ///
-/// Everything is allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds the new
-/// frame's pyramid once, estimates the motion from the previous frame, then swaps the two
-/// pyramids (no copy, no allocation).
+/// The pyramids and scratch are allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds
+/// the new frame's pyramid once, estimates the motion from the previous frame, then swaps the
+/// two pyramids (no copy). `track` is not free of allocations: it makes a few now and then
+/// (counted in `tests/detector_alloc.rs`).
 #[derive(Debug, Clone)]
 pub struct DvoTracker {
     estimator: DvoEstimator,

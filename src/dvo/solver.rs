@@ -5,7 +5,8 @@
 //! (λ ← λ / down-factor, the candidate's system becomes the current one) or reverts to the
 //! current pose (λ ← λ · up-factor, the current system is reused, no extra pass). A level stops
 //! on a small step (‖δ‖∞ below the tolerance), the iteration limit, or λ overflow
-//! (algorithm.md §4.5, fixing the release's one-iteration-late, never-reverted rejection §4.1 f).
+//! (docs/method.md, "Dense visual odometry": this fixes the authors' release, whose rejection
+//! came one iteration late and was never reverted).
 
 use nalgebra::{Isometry3, Matrix6, Vector6};
 

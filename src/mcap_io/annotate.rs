@@ -3,7 +3,7 @@
 //!
 //! Copy mode registers every input schema and channel under its own ID first
 //! (`add_schema_with_id`/`add_channel_with_id`: registering new channels before them makes
-//! mcap 0.26 panic on ID collisions, ecosystem.md §1.3), then the new schemas and channels get
+//! mcap 0.26 panic on ID collisions), then the new schemas and channels get
 //! the next free IDs. Input messages are written with their original header (channel,
 //! sequence, log and publish time) and bytes.
 //!

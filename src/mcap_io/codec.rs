@@ -23,7 +23,7 @@ use super::{
 };
 
 /// Distortion model written into calibrations. The coefficients are all zero: every stage of
-/// occmask ignores lens distortion (algorithm.md §2.1), so the viewer must not undistort either.
+/// occmask ignores lens distortion (docs/method.md, "Datasets"), so the viewer must not undistort either.
 pub const DISTORTION_MODEL: &str = "plumb_bob";
 /// Number of `plumb_bob` coefficients (k1, k2, p1, p2, k3).
 const PLUMB_BOB_COEFFICIENTS: usize = 5;

@@ -1,7 +1,7 @@
 //! Occlusion-accumulation moving-object detector (Kim, Kim & Kim, ICRA 2020).
 //!
 //! Per frame, with the camera motion `current_from_previous` (= exp(ξ_i^{i+1}), see
-//! [`crate::geometry`]), the detector runs algorithm.md §1 steps 2–13 in the authors' order:
+//! [`crate::geometry`]), the detector runs docs/method.md steps 2–13 in the authors' order:
 //!
 //! 1. warp field: back-project pixel u with the *previous* compensated depth Zc_i(u), move it by
 //!    `previous_from_current` = exp(−ξ), project, round to the nearest pixel n(u) (valid only
@@ -14,9 +14,9 @@
 //! 6. newly discovered area Ñ: current depth known but the warped previous depth is not;
 //! 7. 8-connected labelling of {A > τ_α}; components smaller than the (area-scaled) object
 //!    threshold are erased from A, larger ones grow their accumulation into Ñ by breadth-first
-//!    rings (§5.1, the release's sign A(n) + Z(n) − Z(ũ), 5 cm depth gate);
+//!    rings (paper Eq. 10 with the release's sign A(n) + Z(n) − Z(ũ), 5 cm depth gate);
 //! 8. O = {A > τ_α}; predicted components of P = (P̂ ∨ Ñ) ∧ O that do not touch a non-predicted
-//!    object pixel (4-adjacency, §5.3 recommendation) are erased from A and O, except the
+//!    object pixel (4-adjacency, docs/method.md step 12) are erased from A and O, except the
 //!    remainder of an object leaving the view (it holds pixels of P̂ and reaches the border);
 //! 9. the mask is O;
 //! 10. appearance-gated object completion (not in the paper, [`AppearanceGrowthConfig`], on by
@@ -55,7 +55,7 @@ pub use growth::AppearanceGrowthConfig;
 use growth::{AppearanceGrowth, GrowthFrame};
 use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch};
 
-/// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
+/// Functional form of the truncation thresholds τ_α and τ_β (paper Eq. 4–6; docs/method.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ThresholdForm {
@@ -66,8 +66,8 @@ pub enum ThresholdForm {
     Quadratic,
 }
 
-/// Which depth back-projects a current pixel for the warp, and what ΔZ compares
-/// (algorithm.md §9-Q3).
+/// Which depth back-projects a current pixel for the warp, and what ΔZ compares (paper Eq. 1–2;
+/// docs/method.md step 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum WarpDepth {
@@ -81,7 +81,7 @@ pub enum WarpDepth {
     Current,
 }
 
-/// Adjacency used by the pruning test of predicted areas (algorithm.md §5.3).
+/// Adjacency used by the pruning test of predicted areas (docs/method.md step 12).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Adjacency {
@@ -92,7 +92,7 @@ pub enum Adjacency {
     Eight,
 }
 
-/// Every parameter of the detector, with the release defaults (algorithm.md §2).
+/// Every parameter of the detector, with the release defaults (docs/method.md, "Parameters").
 ///
 /// Serialised (JSON config files) field by field with these names; missing fields take the
 /// default, unknown ones are an error; `null` switches an optional stage off.
@@ -110,13 +110,13 @@ pub struct OcclusionConfig {
     /// depth decrease (an object approaching head-on) adds up over frames instead of being
     /// cleared every frame, while noise decays. Values in [0, 1).
     pub sub_threshold_retention: f32,
-    /// Minimum object component size at 640 × 480 in pixels; scaled by image area (§9-Q13).
+    /// Minimum object component size at 640 × 480 in pixels; scaled by image area.
     pub min_object_pixels_vga: usize,
     /// Prediction only crosses 4-neighbour edges whose depth step is below this (m).
     pub prediction_depth_gate_m: f32,
     /// Prediction stops after a ring that contributed at most this many neighbour terms.
     pub prediction_stop_terms: usize,
-    /// Grow accumulation into the newly discovered area (§5); off = skip prediction and pruning.
+    /// Grow accumulation into the newly discovered area (Eq. 10); off = skip prediction and pruning.
     pub predict_newly_discovered: bool,
     /// Adjacency of the pruning test.
     pub prune_adjacency: Adjacency,
@@ -126,7 +126,7 @@ pub struct OcclusionConfig {
     /// object structures thinner than 2r+1 px are erased from A like small components (except
     /// near the border, see `thin_structure_border_margin_px`). 0 = off (the release). Not in the paper: it
     /// removes the 1–3 px strips that flickering Kinect depth edges leave along long edges of
-    /// static scenes (see the README's detector section).
+    /// static scenes (see docs/method.md, "Deviations").
     pub thin_structure_radius_px: usize,
     /// Thin structures within this many pixels of the image border are kept: objects entering
     /// the view start as thin slivers there.
@@ -174,7 +174,7 @@ impl Default for OcclusionConfig {
 /// Pixels of a VGA image, the resolution the object threshold is given for.
 const VGA_PIXELS: usize = 640 * 480;
 
-/// Default `motion_check_margin`. Measured (README "Accuracy"): with correct motions
+/// Default `motion_check_margin`. Measured (docs/accuracy.md): with correct motions
 /// the motion's consistency minus identity's is ≥ −0.02 on every synthetic frame and ≥ −0.07 on
 /// the real TUM / 7-Scenes frames; the two ground-truth glitches found there score −0.18 and
 /// −0.23. 0.1 lies between.
@@ -283,7 +283,7 @@ pub struct OcclusionStats {
     pub growth_us: u64,
 }
 
-/// Per-sequence detector state (algorithm.md §1: Zc, A, P, B and scratch buffers).
+/// Per-sequence detector state (docs/method.md: Zc, A, P, B and scratch buffers).
 #[derive(Debug, Clone)]
 pub struct OcclusionDetector {
     config: OcclusionConfig,
@@ -600,7 +600,7 @@ impl OcclusionDetector {
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
-        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3, the
+        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, the
         // pruning's input). Pruning only removes pixels of P ⊆ O, so the mask size is
         // |O| − pruned, and pruning is skipped when P is empty.
         // O ⊆ O₀ ∪ predicted pixels: the transport zeroed A outside O₀ (A ≤ τ_α there, and the

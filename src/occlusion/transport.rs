@@ -1,4 +1,4 @@
-//! Per-pixel state transport (algorithm.md §1 steps 2–9): warp field, depth compensation,
+//! Per-pixel state transport (docs/method.md steps 2–9): warp field, depth compensation,
 //! occlusion map ΔZ, carried A and P, accumulation, truncations and the newly discovered area,
 //! plus the initial labels of the object set {A > τ_α} (step 10's input) and its bounding box.
 //!
@@ -383,7 +383,7 @@ struct WarpParameters {
     geometric: bool,
 }
 
-/// One row of the warp (algorithm.md §1 step 2): back-projects each pixel at the previous
+/// One row of the warp (docs/method.md step 2): back-projects each pixel at the previous
 /// compensated depth, or (`geometric`) at its measured depth where that is valid; `sources` gets
 /// the nearest previous pixel or `NO_SOURCE`, `qz` the warped point's depth z′. Branch-free, on
 /// equal-length slices, so it vectorises.
@@ -836,7 +836,7 @@ pub(super) fn object_mask_block_with(
     )
 }
 
-/// Reference implementation: the algorithm.md §1 steps as separate full-image passes, with f64
+/// Reference implementation: the docs/method.md steps as separate full-image passes, with f64
 /// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
 pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutputs<'_>) -> TransportCounts {
     let size = inputs.depth_m.size();

@@ -1,9 +1,10 @@
 //! Per-sequence processing: camera motion (DVO or an external pose) + occlusion-accumulation
-//! moving-object masks, frame by frame (algorithm.md §1).
+//! moving-object masks, frame by frame (docs/method.md).
 //!
 //! A [`Processor`] owns the pose source's state (a [`DvoTracker`] or the last external pose), the
-//! [`OcclusionDetector`] and every scratch buffer, so [`Processor::process`] allocates nothing
-//! after the first frame. Frames must be given in time order.
+//! [`OcclusionDetector`] and every scratch buffer, so with external poses [`Processor::process`]
+//! allocates nothing after the first frame (`tests/detector_alloc.rs`); with DVO poses the
+//! tracker still allocates now and then. Frames must be given in time order.
 //!
 //! Pose sources ([`PoseSource`]):
 //! * [`PoseSource::DvoClosedLoop`]: the paper's loop. DVO estimates `current_from_previous` with
@@ -14,7 +15,7 @@
 //!   `world_from_camera = world_from_marker · marker_from_camera`, with the optional fixed
 //!   `camera_from_marker` calibration for markers that are not at the optical centre.
 //!
-//! # Failure modes (issue 6)
+//! # Failure modes
 //!
 //! Every frame gets a [`PoseOutcome`] and the pipeline never outputs NaN (poses, masks, the A
 //! map and statistics are finite whatever the input). Per frame, in order:

@@ -531,7 +531,7 @@ pub const SUPPORTED_DEPTH_ENCODINGS: &str =
     "16UC1/mono16 (raw units), 32FC1 (metres), compressedDepth PNG (16UC1)";
 
 /// Header bytes `compressed_depth_image_transport` puts before the PNG of a 16-bit depth
-/// image (format enum + two float quantisation parameters; ecosystem.md §3.2).
+/// image (format enum + two float quantisation parameters).
 const COMPRESSED_DEPTH_HEADER_BYTES: usize = 12;
 
 fn unsupported(topic: &str, what: &str, found: &str, supported: &str) -> Error {
