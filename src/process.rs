@@ -1417,8 +1417,8 @@ mod tests {
     use super::*;
     use crate::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
-    /// `--no-appearance-growth` reaches the detector: on a box that starts moving, the default
-    /// pipeline completes more of it than the paper's, and the paper's pipeline grows nothing.
+    /// `--appearance-growth` reaches the detector: on a box that starts moving, the pipeline
+    /// with the completion marks more of the box than the paper's.
     #[test]
     fn appearance_growth_option_switches_the_detector_stage() -> Result<()> {
         let config = SequenceConfig {

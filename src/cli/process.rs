@@ -16,6 +16,7 @@ use occmask::mcap_io::annotate::AnnotateOptions;
 use occmask::mcap_io::input::detect::TopicOverrides;
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::AtomicOutput;
+use occmask::occlusion::AppearanceGrowthConfig;
 use occmask::pipeline::{ProcessingMode, ProcessorConfig};
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::{
@@ -103,7 +104,7 @@ pub struct ProcessArgs {
 
     /// DVO, detector and failure-policy parameters from a JSON file: any subset of the fields
     /// `--print-config` prints (the others keep their defaults). Flags such as
-    /// --no-appearance-growth apply on top. Recorded in the output's occmask.process metadata.
+    /// --appearance-growth and --causal apply on top. Recorded in the output's occmask.process metadata.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
 
@@ -112,9 +113,14 @@ pub struct ProcessArgs {
     #[arg(long, exclusive = true)]
     pub print_config: bool,
 
-    /// The paper's detector: no appearance-gated object completion (which completes objects
-    /// that start moving, at ~1.5 ms per 640×480 frame with a large object in view).
+    /// Appearance-gated object completion: objects also grow into neighbouring pixels of
+    /// continuous depth whose intensity changed (completes textured objects that start moving;
+    /// on people standing on a floor it leaks onto the floor, so it is off by default).
     #[arg(long)]
+    pub appearance_growth: bool,
+
+    /// The default (kept for scripts written when completion was on by default).
+    #[arg(long, hide = true, conflicts_with = "appearance_growth")]
     pub no_appearance_growth: bool,
 
     /// Colour image topic (default: detected by schema).
@@ -291,7 +297,12 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
         }
         None => ProcessorConfig::default(),
     };
-    if args.no_appearance_growth {
+    if args.appearance_growth {
+        processor
+            .occlusion
+            .appearance_growth
+            .get_or_insert_with(AppearanceGrowthConfig::default);
+    } else if args.no_appearance_growth {
         processor.occlusion.appearance_growth = None;
     }
     if args.causal {

@@ -19,7 +19,7 @@
 //!    object pixel (4-adjacency, docs/method.md step 12) are erased from A and O, except the
 //!    remainder of an object leaving the view (it holds pixels of P̂ and reaches the border);
 //! 9. the mask is O;
-//! 10. appearance-gated object completion (not in the paper, [`AppearanceGrowthConfig`], on by
+//! 10. appearance-gated object completion (not in the paper, [`AppearanceGrowthConfig`], off by
 //!     default, needs the gray image: [`OcclusionDetector::update_with_gray`]): objects grow into
 //!     neighbours with continuous depth whose intensity changed against the previous image
 //!     warped with the camera motion; grown pixels join O and A.
@@ -145,7 +145,9 @@ pub struct OcclusionConfig {
     /// Appearance-gated object completion (not in the paper, see [`AppearanceGrowthConfig`]):
     /// after the mask is final, objects grow into neighbouring pixels with continuous depth
     /// whose intensity changed against the previous image warped with the camera motion. Needs
-    /// the gray image ([`OcclusionDetector::update_with_gray`]); `None` = off (the paper).
+    /// the gray image ([`OcclusionDetector::update_with_gray`]); `None` = off (the paper, and
+    /// the default: on real people the changing shadows at their feet let it grow over the
+    /// floor, which then misleads the closed loop's odometry; docs/method.md has the figures).
     pub appearance_growth: Option<AppearanceGrowthConfig>,
 }
 
@@ -166,7 +168,7 @@ impl Default for OcclusionConfig {
             thin_structure_border_margin_px: 16,
             prune_exit_margin_px: EXIT_MARGIN_PX,
             motion_check_margin: Some(MOTION_CHECK_MARGIN),
-            appearance_growth: Some(AppearanceGrowthConfig::default()),
+            appearance_growth: None,
         }
     }
 }
