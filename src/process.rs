@@ -1367,8 +1367,8 @@ pub struct PipelineProcessor {
 }
 
 enum Pipeline {
-    Causal(Processor),
-    Offline(OfflineProcessor),
+    Causal(Box<Processor>),
+    Offline(Box<OfflineProcessor>),
 }
 
 /// Choices of [`PipelineProcessor`] beyond the pose mode and the processor configuration.
@@ -1403,8 +1403,10 @@ impl PipelineProcessor {
             ..*config
         };
         let pipeline = match config.mode {
-            ProcessingMode::Causal => Pipeline::Causal(Processor::new(size, intrinsics, config)?),
-            ProcessingMode::Offline => Pipeline::Offline(OfflineProcessor::new(size, intrinsics, config)?),
+            ProcessingMode::Causal => Pipeline::Causal(Box::new(Processor::new(size, intrinsics, config)?)),
+            ProcessingMode::Offline => {
+                Pipeline::Offline(Box::new(OfflineProcessor::new(size, intrinsics, config)?))
+            }
         };
         Ok(Self {
             pipeline,
