@@ -1283,6 +1283,9 @@ pub struct PipelineProcessor {
     keep_accumulation: bool,
 }
 
+/// One pipeline per processed file: the variants' size difference (≈ 2.4 vs 6.8 KB inline)
+/// costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 enum Pipeline {
     Causal(Processor),
     Offline(OfflineProcessor),
