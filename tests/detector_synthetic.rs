@@ -333,3 +333,41 @@ fn failure_class_static_desk() {
         100.0 * score.max_fp_fraction_without_objects
     );
 }
+
+/// Held out (no default was tuned on these; reported apart, bounds looser): measured at
+/// 320×240 F1 / onset: in view at start 0.942 / 0, rests then moves 0.914 / 0, head-on 0.000 /
+/// never, sliding on the floor 0.000 / never, dominant from start 0.206 / never (ATE 0.049 m);
+/// static 0 % false positives. Bounds: the targets where they are met; dominant F1 0.12 and
+/// ATE 0.10 m; head-on and floor sliding are found nowhere and hold only their odometry
+/// (measured ATE 0.041 / 0.045 m; bound 0.08 m).
+#[test]
+fn held_out_scenarios() {
+    for scenario in Scenario::HELD_OUT {
+        let score = default_mode(scenario);
+        let name = scenario.name();
+        match scenario {
+            Scenario::HeldOutInViewAtStart | Scenario::HeldOutRestsThenMoves => {
+                assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES)
+            }
+            Scenario::HeldOutDominantFromStart => {
+                assert!(
+                    score.segmentation.mean_f1 >= 0.12,
+                    "{name}: F1 {:.3}",
+                    score.segmentation.mean_f1
+                );
+                assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
+            }
+            Scenario::HeldOutHeadOnApproach | Scenario::HeldOutSlidingOnFloor => {
+                assert!(score.ate_m <= 0.08, "{name}: ATE {:.3} m", score.ate_m);
+            }
+            Scenario::HeldOutStatic => {
+                assert!(
+                    score.max_fp_fraction_without_objects <= STATIC_FP_LIMIT,
+                    "{name}: {:.3} %",
+                    100.0 * score.max_fp_fraction_without_objects
+                );
+            }
+            _ => unreachable!("{name} is not held out"),
+        }
+    }
+}
