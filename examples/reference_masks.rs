@@ -39,7 +39,11 @@ fn main() -> Result<()> {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--bonn" => is_bonn = true,
-            "--camera" => camera = Some(dataset::parse_camera(&args.next().context("--camera FX,FY,CX,CY")?)?),
+            "--camera" => {
+                camera = Some(dataset::parse_camera(
+                    &args.next().context("--camera FX,FY,CX,CY")?,
+                )?)
+            }
             "--score" => score = Some(args.next().context("--score DIR")?.into()),
             "--write" => write = Some(args.next().context("--write DIR")?.into()),
             "--overlay" => overlay = Some(args.next().context("--overlay DIR")?.into()),
@@ -49,7 +53,11 @@ fn main() -> Result<()> {
     }
     let dir = dir.context("usage: reference_masks DIR [--bonn] [--camera FX,FY,CX,CY] [--score DIR] [--write DIR] [--overlay DIR]")?;
     let sequence = dataset::tum::load(&dir, DatasetKind::Tum)?;
-    let intrinsics = camera.unwrap_or(if is_bonn { bonn::INTRINSICS } else { presets::TUM_FR2 });
+    let intrinsics = camera.unwrap_or(if is_bonn {
+        bonn::INTRINSICS
+    } else {
+        presets::TUM_FR2
+    });
     let truth = if is_bonn {
         bonn::camera_poses(&sequence.groundtruth)
     } else {
@@ -68,9 +76,11 @@ fn main() -> Result<()> {
         .iter()
         .filter_map(|&i| {
             let f = &frames[i];
-            interpolate(&truth, f.depth_timestamp_ns, MAX_POSE_GAP_NS).map(|world_from_camera| FreeSpaceView {
-                depth_m: &f.depth_m,
-                world_from_camera,
+            interpolate(&truth, f.depth_timestamp_ns, MAX_POSE_GAP_NS).map(|world_from_camera| {
+                FreeSpaceView {
+                    depth_m: &f.depth_m,
+                    world_from_camera,
+                }
             })
         })
         .collect();
@@ -96,7 +106,8 @@ fn main() -> Result<()> {
         }
         for (&i, truth_mask) in covered.iter().zip(&reference) {
             let path = predicted.join(name(i));
-            let mask = dataset::read_mask(&path).with_context(|| format!("predicted mask {}", path.display()))?;
+            let mask =
+                dataset::read_mask(&path).with_context(|| format!("predicted mask {}", path.display()))?;
             tally.add_masks(&mask, truth_mask)?;
             if let Some(out) = &overlay {
                 let color = &sequence.color[pairs[i].color];
@@ -113,13 +124,24 @@ fn main() -> Result<()> {
 }
 
 fn save_gray(mask: &Mask, path: &std::path::Path) -> Result<()> {
-    let image = image::GrayImage::from_raw(mask.width() as u32, mask.height() as u32, mask.as_slice().to_vec())
-        .context("mask buffer")?;
-    image.save(path).with_context(|| format!("writing {}", path.display()))
+    let image = image::GrayImage::from_raw(
+        mask.width() as u32,
+        mask.height() as u32,
+        mask.as_slice().to_vec(),
+    )
+    .context("mask buffer")?;
+    image
+        .save(path)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The colour image with true positives tinted green, false positives red, misses blue.
-fn write_overlay(color: &std::path::Path, predicted: &Mask, truth: &Mask, out: &std::path::Path) -> Result<()> {
+fn write_overlay(
+    color: &std::path::Path,
+    predicted: &Mask,
+    truth: &Mask,
+    out: &std::path::Path,
+) -> Result<()> {
     let mut rgb = image::open(color)?.to_rgb8();
     for (i, pixel) in rgb.pixels_mut().enumerate() {
         let (p, t) = (predicted.as_slice()[i] != 0, truth.as_slice()[i] != 0);
@@ -133,5 +155,6 @@ fn write_overlay(color: &std::path::Path, predicted: &Mask, truth: &Mask, out: &
             *c = ((f32::from(*c) * 0.4) + f32::from(t) * 0.6) as u8;
         }
     }
-    rgb.save(out).with_context(|| format!("writing {}", out.display()))
+    rgb.save(out)
+        .with_context(|| format!("writing {}", out.display()))
 }

@@ -43,7 +43,7 @@ use crate::pipeline::offline::OfflineProcessor;
 use crate::pipeline::{
     FrameInput, FrameOutput, PoseFallback, PoseSource, ProcessingMode, Processor, ProcessorConfig,
 };
-use crate::time::{format_ns_as_seconds, split_ns};
+use crate::time::split_ns;
 use crate::trajectory::{interpolate, StampedPose};
 
 pub mod batch;
@@ -176,14 +176,16 @@ pub enum OdometryAnchor {
     /// `world` is the first processed camera (its pose is the identity).
     FirstCamera,
     /// The frame of this pose channel when the file has it (default: `/groundtruth/pose`): the
-    /// first estimated pose is set to the channel's pose at the first frame (interpolated), so
-    /// the estimated and ground-truth cameras start together in Foxglove's 3D panel and `world`
-    /// means one frame in the whole file. Without the channel, or without a pose within
-    /// Without the channel (or with no poses on it), as [`OdometryAnchor::FirstCamera`]; a
-    /// channel that does not decode is not used either (the reason goes to
+    /// estimated pose of the first frame the channel covers (interpolated, samples at most
+    /// [`ProcessConfig::max_pose_gap_ns`] apart) is set to the channel's pose there, so the
+    /// estimated and ground-truth cameras coincide in Foxglove's 3D panel from that frame on and
+    /// `world` means one frame in the whole file. A pose stream that starts a little after the
+    /// images is normal: earlier frames are written once the anchor frame is known, in the same
+    /// frame ([`ProcessReport::anchor_frame_ns`] says which frame anchored). Without the
+    /// channel (or with no poses on it), as [`OdometryAnchor::FirstCamera`]; a channel that
+    /// does not decode or covers no frame is not used either (the reason goes to
     /// [`ProcessReport::anchor_skipped`]: ground truth is not this command's input, and its
-    /// messages are copied unchanged); with poses but none within
-    /// [`ProcessConfig::max_pose_gap_ns`] of the first frame, an error that names `--no-anchor`.
+    /// messages are copied unchanged).
     IfPresent(String),
     /// Like [`OdometryAnchor::IfPresent`], but a missing or undecodable channel is an error
     /// too (`--anchor-topic`).
@@ -292,10 +294,27 @@ pub struct ProcessReport {
     /// Where the frame loop's wall-clock time went (never written to the output, so the
     /// output bytes stay deterministic).
     pub timings: LoopTimings,
-    /// Why the default [`OdometryAnchor`] channel was present but not used (it did not
-    /// decode); `None` when anchored or when there was nothing to anchor to.
+    /// Why the [`OdometryAnchor`] channel was present but not used (it did not decode, or it
+    /// covers no processed frame); `None` when anchored or when there was nothing to anchor to.
     pub anchor_skipped: Option<String>,
+    /// The frame the odometry was anchored at: the first processed frame the anchor channel
+    /// covers (`None` when not anchored).
+    pub anchor_frame: Option<AnchorFrame>,
 }
+
+/// Which frame anchored the odometry ([`ProcessReport::anchor_frame`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AnchorFrame {
+    /// Its index among the processed frames (0 = the first).
+    pub index: u64,
+    /// Its colour stamp.
+    pub timestamp_ns: u64,
+}
+
+/// Results held while no frame is covered by the anchor channel, at most (10 s at 30 Hz): a
+/// pose stream that starts later than this is not used as the anchor (the first camera is
+/// `world`, and the report says why), so memory stays bounded.
+const MAX_UNANCHORED_FRAMES: usize = 300;
 
 /// Where the frame loop's wall-clock time went, in seconds. The frame loop runs the pipeline;
 /// a prefetch thread reads and decodes the input and a writer thread encodes, copies and
@@ -693,25 +712,16 @@ fn load_anchor_poses(
 
 /// `world_from_odometry` for the whole file, from the first processed frame: the anchor pose
 /// at that frame times the inverse of the processor's pose there; identity without an anchor.
-fn anchor_at_first_frame(
-    ctx: &FrameContext<'_>,
+/// `world_from_odometry` from the anchor channel's pose at `stamp`: `None` when the channel
+/// does not cover `stamp`.
+fn anchor_at(
+    poses: &[StampedPose],
+    max_gap_ns: u64,
     stamp: u64,
     odometry_from_camera: &Isometry3<f64>,
-) -> Result<Isometry3<f64>> {
-    let Some((topic, poses)) = ctx.anchor_poses else {
-        return Ok(Isometry3::identity());
-    };
-    let world_from_camera =
-        interpolate(poses, stamp, ctx.config.max_pose_gap_ns).ok_or_else(|| Error::Decode {
-            topic: topic.to_owned(),
-            message: format!(
-                "no anchor pose within {} ms of the first frame ({} s), so the odometry cannot \
-                 start in this channel's frame; pass --no-anchor to use the first camera as world",
-                ctx.config.max_pose_gap_ns / 1_000_000,
-                format_ns_as_seconds(stamp, 6)
-            ),
-        })?;
-    Ok(world_from_camera * odometry_from_camera.inverse())
+) -> Option<Isometry3<f64>> {
+    interpolate(poses, stamp, max_gap_ns)
+        .map(|world_from_camera| world_from_camera * odometry_from_camera.inverse())
 }
 
 /// Processes one input file into `sink`; see the module documentation.
@@ -846,6 +856,7 @@ pub fn process_file<W: Write + Seek + Send>(
         },
         pending: VecDeque::new(),
         in_flight: VecDeque::new(),
+        unanchored: Vec::new(),
         gray: GrayF32::filled(ImageSize::new(0, 0), 0.0),
         depth_m: DepthMeters::filled(ImageSize::new(0, 0), 0.0),
         recycle: (gray_tx, depth_tx),
@@ -872,6 +883,7 @@ pub fn process_file<W: Write + Seek + Send>(
             last_timestamp_ns: None,
             timings: LoopTimings::default(),
             anchor_skipped,
+            anchor_frame: None,
         },
     };
     let ctx = FrameContext {
@@ -1026,6 +1038,8 @@ struct FrameLoop {
     pending: VecDeque<RawMessage>,
     /// Frames given to the processor whose results have not come back yet (oldest first).
     in_flight: VecDeque<InFlight>,
+    /// Results waiting for the first frame the anchor channel covers (oldest first).
+    unanchored: Vec<(InFlight, ProcessedFrame)>,
     gray: GrayF32,
     depth_m: DepthMeters,
     processor: Option<Box<dyn FrameProcessor>>,
@@ -1078,6 +1092,10 @@ impl FrameLoop {
                     self.write_result(ctx, output, hooks, result)?;
                 }
             }
+            if !self.unanchored.is_empty() {
+                self.give_up_anchor(ctx);
+                self.flush_unanchored(ctx, output, hooks)?;
+            }
         }
         // New messages are still to come for frames being paired or processed: input messages
         // after the oldest of them wait.
@@ -1085,7 +1103,10 @@ impl FrameLoop {
             u64::MAX
         } else {
             let pairing = self.pairer.oldest_color_log_time().unwrap_or(u64::MAX);
-            let processing = self.in_flight.front().map_or(u64::MAX, |f| f.log_time_ns);
+            let held = self.unanchored.first().map(|(f, _)| f.log_time_ns);
+            let processing = held
+                .or(self.in_flight.front().map(|f| f.log_time_ns))
+                .unwrap_or(u64::MAX);
             pairing.min(processing)
         };
         while self.pending.front().is_some_and(|m| m.header.log_time <= limit) {
@@ -1198,7 +1219,8 @@ impl FrameLoop {
         Ok(())
     }
 
-    /// Writes the oldest in-flight frame's result (and the input messages before it).
+    /// Takes the oldest in-flight frame's result: written at once when the odometry's frame is
+    /// known, else held until the first frame the anchor channel covers.
     fn write_result(
         &mut self,
         ctx: &FrameContext<'_>,
@@ -1214,6 +1236,74 @@ impl FrameLoop {
                 value: "a result for a frame it was not given".into(),
                 expected: "one result per frame pushed (internal error)".into(),
             })?;
+        if self.world_from_odometry.is_none() {
+            match ctx.anchor_poses {
+                None => self.world_from_odometry = Some(Isometry3::identity()),
+                Some((_, poses)) => {
+                    match anchor_at(
+                        poses,
+                        ctx.config.max_pose_gap_ns,
+                        frame.timestamp_ns,
+                        &result.world_from_camera,
+                    ) {
+                        Some(anchor) => {
+                            self.world_from_odometry = Some(anchor);
+                            self.report.anchor_frame = Some(AnchorFrame {
+                                index: self.report.frames + self.unanchored.len() as u64,
+                                timestamp_ns: frame.timestamp_ns,
+                            });
+                            self.flush_unanchored(ctx, output, hooks)?;
+                        }
+                        None if self.unanchored.len() < MAX_UNANCHORED_FRAMES => {
+                            self.unanchored.push((frame, result));
+                            return Ok(());
+                        }
+                        None => {
+                            self.give_up_anchor(ctx);
+                            self.flush_unanchored(ctx, output, hooks)?;
+                        }
+                    }
+                }
+            }
+        }
+        self.emit(ctx, output, hooks, frame, result)
+    }
+
+    /// No frame is covered by the anchor channel (within [`MAX_UNANCHORED_FRAMES`]): the first
+    /// camera is `world`.
+    fn give_up_anchor(&mut self, ctx: &FrameContext<'_>) {
+        if let Some((topic, _)) = ctx.anchor_poses {
+            self.report.anchor_skipped = Some(format!(
+                "{topic} has no pose within {} ms of the first {} processed frames",
+                ctx.config.max_pose_gap_ns / 1_000_000,
+                self.unanchored.len()
+            ));
+        }
+        self.world_from_odometry = Some(Isometry3::identity());
+    }
+
+    /// Writes the held results, now that the odometry's frame is known.
+    fn flush_unanchored(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        hooks: &mut dyn ProcessHooks,
+    ) -> Result<()> {
+        for (frame, result) in std::mem::take(&mut self.unanchored) {
+            self.emit(ctx, output, hooks, frame, result)?;
+        }
+        Ok(())
+    }
+
+    /// Writes one frame's result (and the input messages before it) in the anchored frame.
+    fn emit(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        hooks: &mut dyn ProcessHooks,
+        frame: InFlight,
+        result: ProcessedFrame,
+    ) -> Result<()> {
         let stamp = frame.timestamp_ns;
         let size = result.mask.size();
         // Copy everything that precedes this frame's new messages.
@@ -1247,14 +1337,7 @@ impl FrameLoop {
             decode_ms: finite_or_zero(frame.decode_ms),
             process_ms: finite_or_zero(frame.process_ms),
         };
-        let world_from_odometry = match self.world_from_odometry {
-            Some(w) => w,
-            None => *self.world_from_odometry.insert(anchor_at_first_frame(
-                ctx,
-                stamp,
-                &result.world_from_camera,
-            )?),
-        };
+        let world_from_odometry = self.world_from_odometry.unwrap_or_else(Isometry3::identity);
         let pose = StampedPose {
             timestamp_ns: stamp,
             world_from_camera: world_from_odometry * result.world_from_camera,
@@ -1283,12 +1366,9 @@ pub struct PipelineProcessor {
     keep_accumulation: bool,
 }
 
-/// One pipeline per processed file: the variants' size difference (≈ 2.4 vs 6.8 KB inline)
-/// costs nothing worth a box.
-#[allow(clippy::large_enum_variant)]
 enum Pipeline {
-    Causal(Processor),
-    Offline(OfflineProcessor),
+    Causal(Box<Processor>),
+    Offline(Box<OfflineProcessor>),
 }
 
 /// Choices of [`PipelineProcessor`] beyond the pose mode and the processor configuration.
@@ -1323,8 +1403,10 @@ impl PipelineProcessor {
             ..*config
         };
         let pipeline = match config.mode {
-            ProcessingMode::Causal => Pipeline::Causal(Processor::new(size, intrinsics, config)?),
-            ProcessingMode::Offline => Pipeline::Offline(OfflineProcessor::new(size, intrinsics, config)?),
+            ProcessingMode::Causal => Pipeline::Causal(Box::new(Processor::new(size, intrinsics, config)?)),
+            ProcessingMode::Offline => {
+                Pipeline::Offline(Box::new(OfflineProcessor::new(size, intrinsics, config)?))
+            }
         };
         Ok(Self {
             pipeline,

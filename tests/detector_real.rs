@@ -208,11 +208,11 @@ fn tum_fr2_desk_static_with_dvo_poses_has_few_false_positives() {
 mod bonn_crowd {
     use super::*;
     use occmask::dataset::{self, bonn, DatasetKind, DecodedPair};
+    use occmask::image_buf::Mask;
     use occmask::metrics::free_space::{free_space_reference, FreeSpaceConfig, FreeSpaceView};
     use occmask::metrics::{ate, rpe, SegmentationSummary, SegmentationTally};
     use occmask::pipeline::offline::OfflineProcessor;
     use occmask::pipeline::{FrameOutput, PoseSource, ProcessingMode};
-    use occmask::image_buf::Mask;
     use rayon::prelude::*;
 
     /// Motion-capture samples further apart than this around a frame are not interpolated.
@@ -234,7 +234,9 @@ mod bonn_crowd {
             .par_iter()
             .map(|p| dataset::decode_pair(&sequence, p, bonn::DEPTH_UNITS_PER_METER).unwrap())
             .collect();
-        let at = |t: u64| interpolate(&truth, t, MAX_POSE_GAP_NS).expect("the window is inside the motion capture");
+        let at = |t: u64| {
+            interpolate(&truth, t, MAX_POSE_GAP_NS).expect("the window is inside the motion capture")
+        };
         let views: Vec<FreeSpaceView> = frames
             .iter()
             .map(|f| FreeSpaceView {
@@ -298,7 +300,9 @@ mod bonn_crowd {
             tally.add_masks(mask, reference).unwrap();
         }
         let ate_m = ate(&poses, &sequence.truth_at_color).unwrap().rmse_m;
-        let rotation_rpe_30_deg = rpe(&poses, &sequence.truth_at_color, 30).unwrap().rotation_rmse_deg;
+        let rotation_rpe_30_deg = rpe(&poses, &sequence.truth_at_color, 30)
+            .unwrap()
+            .rotation_rmse_deg;
         let masks = tally.summary();
         println!(
             "bonn_crowd_200 {source:?} {mode:?}: ATE {ate_m:.4} m, rotation RPE (30 frames) {rotation_rpe_30_deg:.2}°, \
@@ -328,7 +332,11 @@ mod bonn_crowd {
         let causal = run(&sequence, PoseSource::DvoClosedLoop, ProcessingMode::Causal);
         assert_eq!(closed.poses.len(), 200);
         // Bounds: measured values in docs/accuracy.md ("Bonn crowd"), each with its margin.
-        assert!(closed.ate_m <= OFFLINE_ATE_BOUND_M, "offline ATE {:.4} m", closed.ate_m);
+        assert!(
+            closed.ate_m <= OFFLINE_ATE_BOUND_M,
+            "offline ATE {:.4} m",
+            closed.ate_m
+        );
         assert!(
             closed.ate_m <= unmasked.ate_m / 3.0,
             "offline ATE {:.4} m vs unmasked {:.4} m",
@@ -336,9 +344,21 @@ mod bonn_crowd {
             unmasked.ate_m
         );
         assert!(closed.rotation_rpe_30_deg <= OFFLINE_ROTATION_RPE_BOUND_DEG);
-        assert!(closed.masks.mean_f1 >= OFFLINE_F1_BOUND, "offline F1 {:.3}", closed.masks.mean_f1);
-        assert!(causal.ate_m <= CAUSAL_ATE_BOUND_M, "causal ATE {:.4} m", causal.ate_m);
-        assert!(causal.masks.mean_f1 >= CAUSAL_F1_BOUND, "causal F1 {:.3}", causal.masks.mean_f1);
+        assert!(
+            closed.masks.mean_f1 >= OFFLINE_F1_BOUND,
+            "offline F1 {:.3}",
+            closed.masks.mean_f1
+        );
+        assert!(
+            causal.ate_m <= CAUSAL_ATE_BOUND_M,
+            "causal ATE {:.4} m",
+            causal.ate_m
+        );
+        assert!(
+            causal.masks.mean_f1 >= CAUSAL_F1_BOUND,
+            "causal F1 {:.3}",
+            causal.masks.mean_f1
+        );
     }
 
     // Measured (docs/accuracy.md): offline ATE 0.051 m, rotation RPE 1.4°, F1 0.857; causal

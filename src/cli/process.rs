@@ -654,6 +654,16 @@ fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
             rep.frames
         ));
     }
+    if let Some(anchor) = rep.anchor_frame.filter(|a| a.index > 0) {
+        out.push(format!(
+            "{}: the odometry is anchored at frame {} (t = {} s), the first the ground truth \
+             covers; the {} frames before it are in the same frame",
+            input.display(),
+            anchor.index,
+            format_ns_as_seconds(anchor.timestamp_ns, 6),
+            anchor.index
+        ));
+    }
     if let Some(why) = &rep.anchor_skipped {
         out.push(format!(
             "{}: the odometry starts at the first camera, not at the ground truth: {why}",

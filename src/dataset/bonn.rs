@@ -77,7 +77,8 @@ mod tests {
         };
         let c = camera_poses(&[a, b]);
         // The camera moved 1 m where the motion capture says 1.0593 m (same orientation).
-        let step = (c[1].world_from_camera.translation.vector - c[0].world_from_camera.translation.vector).norm();
+        let step =
+            (c[1].world_from_camera.translation.vector - c[0].world_from_camera.translation.vector).norm();
         assert!((step - 1.0).abs() < 1e-9, "{step}");
         assert!((marker_from_camera().rotation.norm() - 1.0).abs() < 1e-12);
     }

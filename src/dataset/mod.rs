@@ -21,7 +21,9 @@ use prost::bytes::Bytes;
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::{presets, PinholeIntrinsics};
-use crate::image_buf::{depth_m_from_u16_into, gray_from_rgb8, DepthMeters, GrayF32, ImageSize, Mask, Rgb8, MASK_SET};
+use crate::image_buf::{
+    depth_m_from_u16_into, gray_from_rgb8, DepthMeters, GrayF32, ImageSize, Mask, Rgb8, MASK_SET,
+};
 use crate::mcap_io::ColorFormat;
 use crate::time::format_ns_as_seconds;
 use crate::trajectory::{parse_tum_line, StampedPose};
@@ -557,7 +559,8 @@ pub struct DecodedPair {
 pub fn decode_pair(sequence: &Sequence, pair: &FramePair, depth_units_per_meter: f64) -> Result<DecodedPair> {
     let color = &sequence.color[pair.color];
     let depth = &sequence.depth[pair.depth];
-    let bytes = std::fs::read(&color.path).map_err(|e| Error::io("cannot read colour image", &color.path, e))?;
+    let bytes =
+        std::fs::read(&color.path).map_err(|e| Error::io("cannot read colour image", &color.path, e))?;
     let rgb = image::load_from_memory(&bytes)
         .map_err(|e| bad_image(&color.path, format!("cannot decode colour image: {e}")))?
         .to_rgb8();
@@ -566,7 +569,11 @@ pub fn decode_pair(sequence: &Sequence, pair: &FramePair, depth_units_per_meter:
     let raw = read_depth(&depth.path)?;
     if raw.size != size {
         return Err(Error::SizeMismatch {
-            what: format!("depth {} vs colour {}", depth.path.display(), color.path.display()),
+            what: format!(
+                "depth {} vs colour {}",
+                depth.path.display(),
+                color.path.display()
+            ),
             expected: size,
             found: raw.size,
         });

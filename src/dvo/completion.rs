@@ -69,18 +69,29 @@ impl IgnoreCompletionConfig {
     }
 }
 
+/// The completion runs on a grid of 2×2-pixel cells (mask: any child set; depth: the nearest
+/// valid child): four times fewer pixels to visit, and DVO pools the mask to its finest level
+/// (half resolution by default) and dilates it by 4 px anyway.
+const CELL_PX: usize = 2;
+
 /// Preallocated state of the completion for images of one size.
 #[derive(Debug, Clone)]
 pub struct IgnoreCompletion {
     config: IgnoreCompletionConfig,
     size: ImageSize,
-    /// Component of every set pixel (`UNLABELLED` elsewhere).
+    /// The cell grid's size.
+    cells: ImageSize,
+    /// Per cell: set (the mask, then the completion).
+    set: Vec<bool>,
+    /// Per cell: the nearest valid depth of its pixels (0 = none).
+    depth_m: Vec<f32>,
+    /// Component of every set cell (`UNLABELLED` elsewhere).
     labels: Vec<u32>,
     /// Median depth of each component (0 when it has no valid depth).
     medians: Vec<f32>,
     /// Depths of the component being labelled (for its median).
     depths: Vec<f32>,
-    /// Breadth-first queue of pixel indices.
+    /// Breadth-first queue of cell indices.
     queue: Vec<u32>,
 }
 
@@ -93,13 +104,17 @@ impl IgnoreCompletion {
     /// [`Error::InvalidParameter`] for a bad config.
     pub fn new(size: ImageSize, config: IgnoreCompletionConfig) -> Result<Self> {
         config.validate()?;
+        let cells = ImageSize::new(size.width.div_ceil(CELL_PX), size.height.div_ceil(CELL_PX));
         Ok(Self {
             config,
             size,
-            labels: vec![UNLABELLED; size.area()],
+            cells,
+            set: vec![false; cells.area()],
+            depth_m: vec![0.0; cells.area()],
+            labels: vec![UNLABELLED; cells.area()],
             medians: Vec::new(),
-            depths: Vec::with_capacity(size.area()),
-            queue: Vec::with_capacity(size.area()),
+            depths: Vec::with_capacity(cells.area()),
+            queue: Vec::with_capacity(cells.area()),
         })
     }
 
@@ -108,8 +123,8 @@ impl IgnoreCompletion {
         &self.config
     }
 
-    /// Writes the completion of `mask` on `depth_m` into `out` (0 / [`MASK_SET`]; a superset
-    /// of `mask`). Returns the pixels added.
+    /// Writes the completion of `mask` on `depth_m` into `out` (0 / [`MASK_SET`]): every 2×2
+    /// cell that holds a mask pixel or that the growth reached. Returns the cells added.
     ///
     /// # Errors
     /// [`Error::SizeMismatch`] when an image is not the completion's size.
@@ -127,17 +142,50 @@ impl IgnoreCompletion {
                 });
             }
         }
-        let (w, h) = (self.size.width, self.size.height);
-        let depth = depth_m.as_slice();
-        let set = out.as_mut_slice();
-        for (o, &m) in set.iter_mut().zip(mask.as_slice()) {
-            *o = if m != 0 { MASK_SET } else { 0 };
+        self.pool(mask, depth_m);
+        self.label_components();
+        let added = self.grow();
+        // Every set cell (the mask's cells and those the growth added).
+        let (w, cw) = (self.size.width, self.cells.width);
+        for (y, out_row) in out.as_mut_slice().chunks_exact_mut(w).enumerate() {
+            let cell_row = &self.set[(y / CELL_PX) * cw..(y / CELL_PX + 1) * cw];
+            for (x, o) in out_row.iter_mut().enumerate() {
+                *o = if cell_row[x / CELL_PX] { MASK_SET } else { 0 };
+            }
         }
+        Ok(added)
+    }
+
+    /// The cell grid of `mask` and `depth_m`.
+    fn pool(&mut self, mask: &Mask, depth_m: &DepthMeters) {
+        self.set.fill(false);
+        self.depth_m.fill(0.0);
+        let (w, cw) = (self.size.width, self.cells.width);
+        for (y, (mask_row, depth_row)) in mask
+            .as_slice()
+            .chunks_exact(w)
+            .zip(depth_m.as_slice().chunks_exact(w))
+            .enumerate()
+        {
+            let row = (y / CELL_PX) * cw;
+            for (x, (&m, &z)) in mask_row.iter().zip(depth_row).enumerate() {
+                let c = row + x / CELL_PX;
+                self.set[c] |= m != 0;
+                let d = &mut self.depth_m[c];
+                if z > 0.0 && (*d == 0.0 || z < *d) {
+                    *d = z;
+                }
+            }
+        }
+    }
+
+    /// 4-connected components of the set cells and their median depths.
+    fn label_components(&mut self) {
+        let (w, h) = (self.cells.width, self.cells.height);
         self.labels.fill(UNLABELLED);
         self.medians.clear();
-        // Components of the mask (4-connected) and their median depths.
-        for start in 0..set.len() {
-            if set[start] == 0 || self.labels[start] != UNLABELLED {
+        for start in 0..self.set.len() {
+            if !self.set[start] || self.labels[start] != UNLABELLED {
                 continue;
             }
             let label = self.medians.len() as u32;
@@ -149,11 +197,17 @@ impl IgnoreCompletion {
             while head < self.queue.len() {
                 let i = self.queue[head] as usize;
                 head += 1;
-                if depth[i] > 0.0 {
-                    self.depths.push(depth[i]);
+                if self.depth_m[i] > 0.0 {
+                    self.depths.push(self.depth_m[i]);
                 }
-                for j in neighbours(i, w, h) {
-                    if set[j] != 0 && self.labels[j] == UNLABELLED {
+                let (x, y) = (i % w, i / w);
+                for (j, inside) in [
+                    (i.wrapping_sub(1), x > 0),
+                    (i + 1, x + 1 < w),
+                    (i.wrapping_sub(w), y > 0),
+                    (i + w, y + 1 < h),
+                ] {
+                    if inside && self.set[j] && self.labels[j] == UNLABELLED {
                         self.labels[j] = label;
                         self.queue.push(j as u32);
                     }
@@ -167,11 +221,16 @@ impl IgnoreCompletion {
             };
             self.medians.push(median);
         }
-        // Breadth-first growth from every mask pixel with depth.
+    }
+
+    /// Breadth-first growth from every set cell with depth; returns the cells added.
+    fn grow(&mut self) -> usize {
+        let (w, h) = (self.cells.width, self.cells.height);
+        let (set, depth) = (&mut self.set, &self.depth_m);
         self.queue.clear();
         self.queue.extend(
             (0..set.len())
-                .filter(|&i| set[i] != 0 && depth[i] > 0.0)
+                .filter(|&i| set[i] && depth[i] > 0.0)
                 .map(|i| i as u32),
         );
         let (step, band) = (self.config.max_depth_step_fraction, self.config.max_depth_band_m);
@@ -183,62 +242,60 @@ impl IgnoreCompletion {
             let label = self.labels[i];
             let median = self.medians[label as usize];
             let z = depth[i];
-            for j in neighbours(i, w, h) {
+            let (x, y) = (i % w, i / w);
+            for (j, inside) in [
+                (i.wrapping_sub(1), x > 0),
+                (i + 1, x + 1 < w),
+                (i.wrapping_sub(w), y > 0),
+                (i + w, y + 1 < h),
+            ] {
+                if !inside || set[j] {
+                    continue;
+                }
                 let zj = depth[j];
-                if set[j] == 0 && zj > 0.0 && (zj - z).abs() < step * z && (zj - median).abs() < band {
-                    set[j] = MASK_SET;
+                if zj > 0.0 && (zj - z).abs() < step * z && (zj - median).abs() < band {
+                    set[j] = true;
                     self.labels[j] = label;
                     self.queue.push(j as u32);
                     added += 1;
                 }
             }
         }
-        Ok(added)
+        added
     }
-}
-
-/// The 4-neighbours of pixel `i` inside a `w` × `h` image.
-#[inline]
-fn neighbours(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
-    let (x, y) = (i % w, i / w);
-    [
-        (x > 0).then(|| i - 1),
-        (x + 1 < w).then(|| i + 1),
-        (y > 0).then(|| i - w),
-        (y + 1 < h).then(|| i + w),
-    ]
-    .into_iter()
-    .flatten()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A wall at 3 m, a floor from the bottom edge (1.5 m there) to the wall (3 m at row 30),
-    /// and a box (x 20..40, y 10..45) at 2.3 m standing on the floor (the floor is at 2.32 m
-    /// just below it, so box and floor are depth-continuous).
+    /// A wall at 3.2 m, a floor from the wall (3.2 m at row 30) to the bottom edge (2.2 m at row
+    /// 63), and a box (x 20..40, y 10..45) at 2.75 m standing on the floor (the floor is at
+    /// 2.745 m just below it, so box and floor are depth-continuous).
     fn scene() -> (ImageSize, DepthMeters) {
         let size = ImageSize::new(64, 64);
         let depth = DepthMeters::from_fn(size, |x, y| {
-            let floor = if y >= 30 {
-                Some(3.0 - 1.5 * (y - 30) as f32 / 33.0)
-            } else {
-                None
-            };
             if (20..40).contains(&x) && (10..45).contains(&y) {
-                2.3
+                2.75
+            } else if y >= 30 {
+                3.2 - (y - 30) as f32 / 33.0
             } else {
-                floor.unwrap_or(3.0)
+                3.2
             }
         });
         (size, depth)
     }
 
+    /// A band of 0.3 m keeps the wall (0.45 m behind the box) out.
+    const CONFIG: IgnoreCompletionConfig = IgnoreCompletionConfig {
+        max_depth_step_fraction: DEFAULT_MAX_DEPTH_STEP_FRACTION,
+        max_depth_band_m: 0.3,
+    };
+
     #[test]
     fn fills_the_object_and_stops_at_depth_edges_and_the_band() {
         let (size, depth) = scene();
-        let mut completion = IgnoreCompletion::new(size, IgnoreCompletionConfig::default()).unwrap();
+        let mut completion = IgnoreCompletion::new(size, CONFIG).unwrap();
         // Only a strip of the box's left edge is detected.
         let mask = Mask::from_fn(size, |x, y| {
             if (20..23).contains(&x) && (12..20).contains(&y) {
@@ -255,22 +312,24 @@ mod tests {
                 let z = depth.get(x, y);
                 if on_box(x, y) {
                     assert_eq!(out.get(x, y), MASK_SET, "box pixel ({x}, {y}) not completed");
-                } else if (z - 2.3).abs() >= 0.5 {
-                    // The wall and the floor beyond the band stay out.
+                } else if (z - 2.75).abs() >= 0.3 + 0.06 {
+                    // The wall and the floor beyond the band (plus one cell's depth change on
+                    // the floor) stay out.
                     assert_eq!(out.get(x, y), 0, "({x}, {y}) at {z} m leaked into");
                 }
             }
         }
-        assert!(added >= 20 * 35 - 3 * 8);
-        // The floor at the box's foot is continuous and within the band: taken, but only up to
-        // 0.5 m from the box's depth (checked above).
+        // In 2×2 cells: the box is 10 × 17.5 cells, the seed strip 1.5 × 4.
+        assert!(added >= 10 * 17 - 2 * 4, "{added} cells");
+        // The floor at the box's foot is continuous and within the band: taken (but only up to
+        // 0.3 m from the box's depth, checked above).
         assert_eq!(out.get(30, 50), MASK_SET);
     }
 
     #[test]
-    fn an_empty_mask_stays_empty_and_pixels_without_depth_do_not_grow() {
+    fn an_empty_mask_stays_empty_and_cells_without_depth_do_not_grow() {
         let (size, mut depth) = scene();
-        let mut completion = IgnoreCompletion::new(size, IgnoreCompletionConfig::default()).unwrap();
+        let mut completion = IgnoreCompletion::new(size, CONFIG).unwrap();
         let mut out = Mask::filled(size, MASK_SET);
         assert_eq!(
             completion
@@ -279,11 +338,14 @@ mod tests {
             0
         );
         assert!(out.as_slice().iter().all(|&m| m == 0));
-        // A mask pixel without depth is kept but grows nothing.
-        depth.set(5, 5, 0.0);
+        // A mask pixel in a cell without depth is kept (its cell) but grows nothing.
+        for (x, y) in [(4, 4), (5, 4), (4, 5), (5, 5)] {
+            depth.set(x, y, 0.0);
+        }
         let mask = Mask::from_fn(size, |x, y| if (x, y) == (5, 5) { MASK_SET } else { 0 });
         assert_eq!(completion.complete(&mask, &depth, &mut out).unwrap(), 0);
         assert_eq!(out.get(5, 5), MASK_SET);
+        assert_eq!(out.as_slice().iter().filter(|&&m| m != 0).count(), 4);
     }
 
     #[test]

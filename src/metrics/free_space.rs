@@ -156,7 +156,10 @@ pub fn free_space_reference(
         .collect();
     let area_scale = size.area() as f64 / (640.0 * 480.0);
     let scaled = |px: usize| ((px as f64 * area_scale).round() as usize).max(1);
-    let (min_seed, min_component) = (scaled(config.min_seed_pixels), scaled(config.min_component_pixels));
+    let (min_seed, min_component) = (
+        scaled(config.min_seed_pixels),
+        scaled(config.min_component_pixels),
+    );
     (0..views.len())
         .into_par_iter()
         .map(|i| {
@@ -167,7 +170,10 @@ pub fn free_space_reference(
             drop_small_components(&mut mask, size, min_seed);
             grow(&mut mask, &counts, depth, config);
             drop_small_components(&mut mask, size, min_component);
-            Mask::from_vec(size, mask.into_iter().map(|m| if m { MASK_SET } else { 0 }).collect())
+            Mask::from_vec(
+                size,
+                mask.into_iter().map(|m| if m { MASK_SET } else { 0 }).collect(),
+            )
         })
         .collect()
 }
@@ -182,7 +188,9 @@ fn nearest_depth(depth: &DepthMeters, radius: usize) -> DepthMeters {
         let row = depth.row(y);
         for x in 0..w {
             let (x0, x1) = (x.saturating_sub(radius), (x + radius).min(w - 1));
-            rows[y * w + x] = row[x0..=x1].iter().fold(f32::INFINITY, |m, &z| m.min(valid_or_inf(z)));
+            rows[y * w + x] = row[x0..=x1]
+                .iter()
+                .fold(f32::INFINITY, |m, &z| m.min(valid_or_inf(z)));
         }
     }
     DepthMeters::from_fn(size, |x, y| {
@@ -217,7 +225,11 @@ fn count_views(
             continue;
         };
         let other_from_this = views[j].world_from_camera.inverse() * views[i].world_from_camera;
-        let r = other_from_this.rotation.to_rotation_matrix().into_inner().cast::<f32>();
+        let r = other_from_this
+            .rotation
+            .to_rotation_matrix()
+            .into_inner()
+            .cast::<f32>();
         let t = other_from_this.translation.vector.cast::<f32>();
         let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
         let (other, other_nearest) = (views[j].depth_m.as_slice(), nearest[j].as_slice());
@@ -368,7 +380,16 @@ fn drop_small_components(mask: &mut [bool], size: ImageSize, min_pixels: usize) 
     }
 }
 
-const NEIGHBOURS_8: [(isize, isize); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
+const NEIGHBOURS_8: [(isize, isize); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
 
 /// Step 4: synchronous rings (each ring decides from the region as it was before the ring),
 /// visiting only the unset neighbours of the previous ring.
@@ -485,7 +506,10 @@ mod tests {
             // Where the slab is wholly in view (frames 2–26), 90 % of it is marked. (A sliver
             // at the border is thinner than the seeds' opening.)
             if (2..=26).contains(&f) {
-                assert!(on_slab * 10 >= slab * 9, "frame {f}: {on_slab} of {slab} slab pixels");
+                assert!(
+                    on_slab * 10 >= slab * 9,
+                    "frame {f}: {on_slab} of {slab} slab pixels"
+                );
             }
         }
     }
@@ -495,7 +519,9 @@ mod tests {
         let size = ImageSize::new(160, 120);
         let k = presets::TUM_FR2.at_level(2);
         // A room corner: a slanted wall, seen from a camera moving 2 cm per frame sideways.
-        let poses: Vec<Isometry3<f64>> = (0..30).map(|f| Isometry3::translation(0.02 * f as f64, 0.0, 0.0)).collect();
+        let poses: Vec<Isometry3<f64>> = (0..30)
+            .map(|f| Isometry3::translation(0.02 * f as f64, 0.0, 0.0))
+            .collect();
         let depths: Vec<DepthMeters> = poses
             .iter()
             .map(|p| {
