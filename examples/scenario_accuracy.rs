@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release --example scenario_accuracy -- [--size WxH] [--seed N]
-//!     [--scenarios original|failure|held_out|every|NAME[,NAME…]]
+//!     [--scenarios SET|NAME[,SET|NAME…]]   (SET: original, failure, held_out, every)
 //!     [--modes true_pose_causal,true_pose_offline,dvo_causal,dvo_offline]
 //!     [--config LABEL=FILE]… [--no-default] [--json FILE]
 //! ```
@@ -70,17 +70,18 @@ fn load_config(path: &PathBuf) -> ProcessorConfig {
     config
 }
 
+/// The scenarios of a comma-separated list of set names and scenario names, in order.
 fn scenarios(which: &str) -> Vec<Scenario> {
-    match which {
-        "original" => Scenario::ALL.to_vec(),
-        "failure" => Scenario::FAILURE_CLASSES.to_vec(),
-        "held_out" => Scenario::HELD_OUT.to_vec(),
-        "every" => Scenario::EVERY.to_vec(),
-        names => names
-            .split(',')
-            .map(|n| Scenario::from_name(n).unwrap_or_else(|| panic!("unknown scenario {n}")))
-            .collect(),
-    }
+    which
+        .split(',')
+        .flat_map(|n| match n {
+            "original" => Scenario::ALL.to_vec(),
+            "failure" => Scenario::FAILURE_CLASSES.to_vec(),
+            "held_out" => Scenario::HELD_OUT.to_vec(),
+            "every" => Scenario::EVERY.to_vec(),
+            name => vec![Scenario::from_name(name).unwrap_or_else(|| panic!("unknown scenario {name}"))],
+        })
+        .collect()
 }
 
 fn set_name(scenario: Scenario) -> &'static str {
