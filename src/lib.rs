@@ -5,7 +5,7 @@
 //! 1. core types and math: [`error`], [`image_buf`], [`time`], [`geometry`], [`trajectory`];
 //! 2. pure algorithms (no files, no MCAP, no printing): pyramid, dvo, occlusion, metrics, synthetic;
 //! 3. I/O adapters: dataset readers, MCAP reading and writing;
-//! 4. the per-sequence pipeline;
+//! 4. the per-sequence pipeline, and its scoring on synthetic scenarios ([`scenario_eval`]);
 //! 5. the command-line interface (in the binary).
 #![deny(missing_docs)]
 
@@ -23,6 +23,7 @@ pub mod occlusion;
 pub mod pipeline;
 pub mod process;
 pub mod pyramid;
+pub mod scenario_eval;
 pub(crate) mod serde_util;
 pub mod synthetic;
 pub mod time;
