@@ -6,7 +6,8 @@ For each of --rounds rounds, in this order:
   1. OpenCV 5 `cv2.Odometry` (OdometryType.RGB, default settings) over every colour/depth pair,
      frames decoded beforehand (only `prepareFrame` + `compute` are timed);
   2. `occmask process IN.mcap -o OUT.mcap` for each --mode (offline, causal), the whole command
-     timed (decoding, DVO, detector, encoding and writing the annotated copy).
+     timed (decoding, DVO, detector, encoding and writing the annotated copy), its peak resident
+     memory taken by GNU time (/usr/bin/time).
 The ratio of each round's occmask frames/s to that round's OpenCV frames/s is printed, then
 the median over rounds. Speed drifts on a shared machine; the ratio within a round does not
 (both run in the same minute).
@@ -122,11 +123,15 @@ def occmask_run(binary, mcap, mode, out_dir):
     command = [binary, "process", mcap, "-o", out, "--force", "--quiet", "--export-trajectory", trajectory]
     if mode == "causal":
         command.append("--causal")
+    # GNU time records the peak resident set size (KiB) of the run.
+    rss_file = os.path.join(out_dir, f"{mode}.rss")
     started = time.perf_counter()
-    subprocess.run(command, check=True)
+    subprocess.run(["/usr/bin/time", "-f", "%M", "-o", rss_file] + command, check=True)
     elapsed = time.perf_counter() - started
     traj = np.loadtxt(trajectory)
-    return len(traj) / elapsed, traj
+    with open(rss_file) as f:
+        peak_mb = int(f.read().split()[-1]) / 1024
+    return len(traj) / elapsed, traj, peak_mb
 
 
 def main():
@@ -152,12 +157,12 @@ def main():
             if r == 0:
                 cv_ate = ate(cv_positions, positions_at(gt, [t for t, _, _ in frames]))
             for m in modes:
-                fps, traj = occmask_run(a.bin, a.mcap, m, work)
+                fps, traj, peak_mb = occmask_run(a.bin, a.mcap, m, work)
                 ratios[m].append(fps / cv_fps)
                 line += f" | occmask {m} {fps:.1f} frames/s ({fps / cv_fps:.2f}x)"
                 if r == 0:
                     ours = ate(traj[:, 1:4], positions_at(gt, traj[:, 0]))
-                    line += f" ATE {ours:.4f} m"
+                    line += f" ATE {ours:.4f} m, peak RSS {peak_mb:.0f} MB"
             print(line, flush=True)
     print(f"OpenCV RGB odometry ATE {cv_ate:.4f} m")
     for m in modes:
