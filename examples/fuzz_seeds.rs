@@ -203,7 +203,7 @@ fn proto_seeds(out: &Path) -> Result<()> {
         "compressed-depth",
         &with_selector(1, &depth_png.encode_to_vec()),
     )?;
-    let calibration = codec::camera_calibration(STAMP_NS, "cam", &presets::TUM_FR2, SIZE)?;
+    let calibration = codec::camera_calibration(STAMP_NS, "cam", &presets::TUM_FR2, SIZE, None)?;
     write(out, "proto_calibration", "fr2", &calibration.encode_to_vec())?;
     Ok(())
 }
@@ -492,7 +492,7 @@ fn protobuf_file(compression: Compression) -> Result<Vec<u8>> {
     let png = Bytes::from(png(&rgb())?);
     for i in 0..3u64 {
         let t = STAMP_NS + i * 33_000_000;
-        w.write_camera_info("/camera/color/camera_info", t, &presets::TUM_FR2, SIZE)?;
+        w.write_camera_info("/camera/color/camera_info", t, &presets::TUM_FR2, SIZE, None)?;
         w.write_color_compressed("/camera/color/image", t, png.clone(), ColorFormat::Png)?;
         w.write_depth_u16("/camera/depth/image", t, &depth_u16(), SIZE, 5000.0)?;
         w.write_pose("/groundtruth/pose", t, &pose(i))?;

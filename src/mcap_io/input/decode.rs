@@ -6,11 +6,12 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
+use crate::geometry::distortion::{CameraModel, LensDistortion};
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
 use crate::mcap_io::codec::decode_compressed_pixels;
 use crate::time::{checked_join_ns, join_ns};
 
-use super::{json, ros2};
+use super::{json, ros1, ros2};
 
 /// How a channel's messages are serialised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -21,6 +22,8 @@ pub enum Flavor {
     FoxgloveJson,
     /// ROS 2 message, CDR.
     Ros2Cdr,
+    /// ROS 1 message (`ros1` encoding, `ros1msg` schema).
+    Ros1,
 }
 
 /// What a channel carries.
@@ -82,6 +85,18 @@ impl ChannelType {
                     _ => return None,
                 };
                 (Flavor::Ros2Cdr, message)
+            }
+            ("ros1", name) => {
+                let message = match name {
+                    ros1::names::IMAGE => T::RawImage,
+                    ros1::names::COMPRESSED_IMAGE => T::CompressedImage,
+                    ros1::names::CAMERA_INFO => T::Calibration,
+                    ros1::names::POSE_STAMPED => T::PoseInFrame,
+                    ros1::names::TRANSFORM_STAMPED => T::FrameTransform,
+                    ros1::names::TF_MESSAGE | ros1::names::TF_MESSAGE_LEGACY => T::FrameTransforms,
+                    _ => return None,
+                };
+                (Flavor::Ros1, message)
             }
             _ => return None,
         };
@@ -171,6 +186,10 @@ pub struct CalibrationMsg {
     pub size: ImageSize,
     /// K, row-major (9 numbers when well-formed).
     pub k: Vec<f64>,
+    /// Distortion model name (`plumb_bob`, `rational_polynomial`, ...; may be empty).
+    pub distortion_model: String,
+    /// Distortion coefficients in the model's order (ROS / Foxglove `D`).
+    pub d: Vec<f64>,
 }
 
 impl CalibrationMsg {
@@ -185,6 +204,36 @@ impl CalibrationMsg {
             topic,
             " (an all-zero K means the camera is uncalibrated: pass --camera FX,FY,CX,CY)",
         )
+    }
+
+    /// The lens distortion (`None` for zero coefficients).
+    ///
+    /// # Errors
+    /// [`Error::Decode`] naming `topic` for unsupported models (fisheye) with non-zero
+    /// coefficients, naming the flags that override or ignore the distortion.
+    pub fn distortion(&self, topic: &str) -> Result<Option<LensDistortion>> {
+        LensDistortion::from_ros(&self.distortion_model, &self.d).map_err(|e| {
+            decode_error(
+                topic,
+                format!(
+                    "{}; pass --camera FX,FY,CX,CY[,K1,K2,P1,P2,K3] to give the camera, or \
+                     --no-undistort to treat the images as pinhole",
+                    e.0
+                ),
+            )
+        })
+    }
+
+    /// The camera model: size, intrinsics and distortion.
+    ///
+    /// # Errors
+    /// As [`Self::intrinsics`] and [`Self::distortion`].
+    pub fn camera_model(&self, topic: &str) -> Result<CameraModel> {
+        Ok(CameraModel {
+            size: self.size,
+            intrinsics: self.intrinsics(topic)?,
+            distortion: self.distortion(topic)?,
+        })
     }
 }
 
@@ -221,6 +270,21 @@ fn from_cdr<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str
     // checking declared lengths against the message before allocating (cdr_read.rs).
     super::cdr_read::from_bytes::<T>(data)
         .map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
+}
+
+fn from_ros1<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str) -> Result<T> {
+    super::cdr_read::from_ros1_bytes::<T>(data)
+        .map_err(|e| decode_error(topic, format!("expected a ROS 1 {what}: {e}")))
+}
+
+fn ros1_ns(t: ros1::Time, topic: &str) -> Result<u64> {
+    if t.nsecs >= 1_000_000_000 {
+        return Err(decode_error(
+            topic,
+            format!("expected stamp nsecs < 1e9, found {}", t.nsecs),
+        ));
+    }
+    Ok(join_ns(u64::from(t.secs), t.nsecs))
 }
 
 fn proto_ns(stamp: Option<&foxglove::messages::Timestamp>) -> u64 {
@@ -345,6 +409,32 @@ pub fn decode_image(ct: ChannelType, topic: &str, data: &[u8]) -> Result<ImageMs
                 },
             })
         }
+        (Flavor::Ros1, MessageType::RawImage) => {
+            let m: ros1::Image = from_ros1(data, topic, ros1::names::IMAGE)?;
+            Ok(ImageMsg {
+                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                payload: ImagePayload::Raw {
+                    width: m.width,
+                    height: m.height,
+                    encoding: m.encoding,
+                    step: m.step,
+                    big_endian: m.is_bigendian != 0,
+                    data: m.data,
+                },
+            })
+        }
+        (Flavor::Ros1, MessageType::CompressedImage) => {
+            let m: ros1::CompressedImage = from_ros1(data, topic, ros1::names::COMPRESSED_IMAGE)?;
+            Ok(ImageMsg {
+                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                payload: ImagePayload::Compressed {
+                    format: m.format,
+                    data: m.data,
+                },
+            })
+        }
         _ => Err(decode_error(
             topic,
             format!("expected an image channel, found {:?}", ct.message),
@@ -365,6 +455,8 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
                 frame_id: m.frame_id,
                 size: ImageSize::new(m.width as usize, m.height as usize),
                 k: m.k,
+                distortion_model: m.distortion_model,
+                d: m.d,
             })
         }
         (Flavor::FoxgloveJson, MessageType::Calibration) => {
@@ -374,6 +466,8 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
                 frame_id: m.frame_id,
                 size: ImageSize::new(m.width as usize, m.height as usize),
                 k: m.k,
+                distortion_model: m.distortion_model,
+                d: m.d,
             })
         }
         (Flavor::Ros2Cdr, MessageType::Calibration) => {
@@ -383,6 +477,19 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
                 frame_id: m.header.frame_id,
                 size: ImageSize::new(m.width as usize, m.height as usize),
                 k: m.k.to_vec(),
+                distortion_model: m.distortion_model,
+                d: m.d,
+            })
+        }
+        (Flavor::Ros1, MessageType::Calibration) => {
+            let m: ros1::CameraInfo = from_ros1(data, topic, ros1::names::CAMERA_INFO)?;
+            Ok(CalibrationMsg {
+                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                size: ImageSize::new(m.width as usize, m.height as usize),
+                k: m.k.to_vec(),
+                distortion_model: m.distortion_model,
+                d: m.d,
             })
         }
         _ => Err(decode_error(
@@ -465,7 +572,37 @@ pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<Pos
             iso,
         ))
     };
+    let ros1_tf = |m: ros1::TransformStamped| -> Result<PoseSample> {
+        let (t, q) = (m.transform.translation, m.transform.rotation);
+        let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+        Ok(sample(
+            ros1_ns(m.header.stamp, topic)?,
+            m.header.frame_id,
+            Some(m.child_frame_id),
+            iso,
+        ))
+    };
     match (ct.flavor, ct.message) {
+        (Flavor::Ros1, MessageType::PoseInFrame) => {
+            let m: ros1::PoseStamped = from_ros1(data, topic, ros1::names::POSE_STAMPED)?;
+            let (t, q) = (m.pose.position, m.pose.orientation);
+            let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+            Ok(vec![sample(
+                ros1_ns(m.header.stamp, topic)?,
+                m.header.frame_id,
+                None,
+                iso,
+            )])
+        }
+        (Flavor::Ros1, MessageType::FrameTransform) => Ok(vec![ros1_tf(from_ros1(
+            data,
+            topic,
+            ros1::names::TRANSFORM_STAMPED,
+        )?)?]),
+        (Flavor::Ros1, MessageType::FrameTransforms) => {
+            let m: ros1::TfMessage = from_ros1(data, topic, ros1::names::TF_MESSAGE)?;
+            m.transforms.into_iter().map(ros1_tf).collect()
+        }
         (Flavor::FoxgloveProtobuf, MessageType::PoseInFrame) => {
             let m: fm::PoseInFrame = proto(data, topic, "foxglove.PoseInFrame")?;
             let pose = m.pose.unwrap_or_default();
