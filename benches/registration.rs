@@ -10,7 +10,7 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use occmask::image_buf::{DepthMeters, GrayF32, Mask};
-use occmask::registration::{distortion_map, undistortion_maps, DepthRegistration};
+use occmask::registration::{distortion_map, inscribed_pinhole, undistortion_map, DepthRegistration};
 use occmask::synthetic::{RgbdRig, Scenario, SequenceConfig, SyntheticFrame, SyntheticSequence};
 
 fn geometry(c: &mut Criterion) {
@@ -22,13 +22,13 @@ fn geometry(c: &mut Criterion) {
     sequence.render_rig_into(30, &rig, &mut color, &mut depth);
 
     let mut group = c.benchmark_group("registration");
+    let pinhole = inscribed_pinhole(&rig.color);
     let mut registered = DepthMeters::filled(rig.color.size, 0.0);
     group.throughput(Throughput::Elements(rig.depth.size.area() as u64));
     let threads = rayon::current_num_threads();
     for bands in [1, threads] {
         let mut registration =
-            DepthRegistration::new(&rig.depth, &rig.color.undistorted(), &rig.color_from_depth, bands)
-                .unwrap();
+            DepthRegistration::new(&rig.depth, &pinhole, &rig.color_from_depth, bands).unwrap();
         group.bench_function(format!("register_depth_{bands}_bands/{}", rig.depth.size), |b| {
             b.iter(|| {
                 registration
@@ -37,8 +37,7 @@ fn geometry(c: &mut Criterion) {
             })
         });
     }
-    let registration =
-        DepthRegistration::new(&rig.depth, &rig.color.undistorted(), &rig.color_from_depth, 1).unwrap();
+    let registration = DepthRegistration::new(&rig.depth, &pinhole, &rig.color_from_depth, 1).unwrap();
     group.bench_function(format!("register_depth_reference/{}", rig.depth.size), |b| {
         b.iter(|| {
             registration
@@ -47,8 +46,8 @@ fn geometry(c: &mut Criterion) {
         })
     });
 
-    let (bilinear, nearest) = undistortion_maps(&rig.color).unwrap();
-    let back = distortion_map(&rig.color).unwrap();
+    let bilinear = undistortion_map(&rig.color, &pinhole).unwrap();
+    let back = distortion_map(&rig.color, &pinhole).unwrap();
     let mut gray = GrayF32::filled(rig.color.size, 0.0);
     group.throughput(Throughput::Elements(rig.color.size.area() as u64));
     group.bench_function(format!("undistort_gray/{}", rig.color.size), |b| {
@@ -60,8 +59,8 @@ fn geometry(c: &mut Criterion) {
     let mut undistorted_depth = DepthMeters::filled(rig.color.size, 0.0);
     group.bench_function(format!("undistort_depth/{}", rig.color.size), |b| {
         b.iter(|| {
-            nearest
-                .apply_into(black_box(&color.depth_m), &mut undistorted_depth)
+            bilinear
+                .apply_depth_into(black_box(&color.depth_m), &mut undistorted_depth)
                 .unwrap()
         })
     });

@@ -12,7 +12,10 @@
 //! - `distorted`: colour with Kinect-class lens distortion, depth registered to those
 //!   distorted pixels (as a Kinect's registered depth is);
 //! - `realsense`: colour 640×480 with that distortion, depth 848×480 from its own camera
-//!   15 mm away, the transform on `/tf_static`.
+//!   15 mm away, the transform on `/tf_static`;
+//! - `realsense-pinhole`: the same with a pinhole colour camera (registration alone);
+//! - `reference`: `registered` through the pinhole camera the distorted colour is undistorted
+//!   into (`registration::inscribed_pinhole`): what `process` should see of the other rigs.
 //!
 //! `--sensor`: the depth sensor model (default `kinect`, `synthetic::DepthSensorModel`);
 //! `ideal` has no noise and no invalid pixels, `unquantised` the Kinect's noise and invalid
@@ -76,6 +79,22 @@ fn main() -> anyhow::Result<()> {
         None => None,
         Some("registered") => Some(RgbdRig::registered(&config)),
         Some("realsense") => Some(RgbdRig::realsense_like(&config)),
+        Some("reference") => {
+            let distorted = CameraModel {
+                distortion: Some(KINECT_LIKE_DISTORTION),
+                ..CameraModel::pinhole(config.size, config.intrinsics())
+            };
+            let pinhole = occmask::registration::inscribed_pinhole(&distorted);
+            Some(RgbdRig {
+                color: pinhole,
+                depth: pinhole,
+                color_from_depth: nalgebra::Isometry3::identity(),
+            })
+        }
+        Some("realsense-pinhole") => Some(RgbdRig {
+            color: CameraModel::pinhole(config.size, config.intrinsics()),
+            ..RgbdRig::realsense_like(&config)
+        }),
         Some("distorted") => {
             let color = CameraModel {
                 distortion: Some(KINECT_LIKE_DISTORTION),
@@ -87,7 +106,9 @@ fn main() -> anyhow::Result<()> {
                 color_from_depth: nalgebra::Isometry3::identity(),
             })
         }
-        Some(other) => bail!("unknown rig {other:?}: registered, distorted or realsense"),
+        Some(other) => {
+            bail!("unknown rig {other:?}: registered, distorted, realsense, realsense-pinhole or reference")
+        }
     };
     for scenario in Scenario::ALL {
         if !wanted.is_empty() && !wanted.iter().any(|w| w == scenario.name()) {

@@ -248,7 +248,8 @@ impl Default for ProcessConfig {
 pub struct ProcessReport {
     /// The channels used.
     pub topics: RgbdTopics,
-    /// Intrinsics used.
+    /// Intrinsics of the images the pipeline saw (the colour camera's K, magnified when its
+    /// lens was undistorted; see [`rectify::InputGeometry::pipeline`]).
     pub intrinsics: PinholeIntrinsics,
     /// What was done to the images before the pipeline (registration, undistortion).
     pub geometry: InputGeometry,
@@ -925,7 +926,7 @@ pub fn process_file<W: Write + Seek + Send>(
         first_color_ns: None,
         report: ProcessReport {
             topics: topics.clone(),
-            intrinsics,
+            intrinsics: geometry.pipeline.intrinsics,
             geometry: geometry.clone(),
             depth_units_per_meter,
             color_messages: 0,
@@ -948,7 +949,9 @@ pub fn process_file<W: Write + Seek + Send>(
     let ctx = FrameContext {
         config,
         topics: &topics,
-        intrinsics,
+        // The pipeline sees the undistorted pinhole camera (its K when the lens was undistorted
+        // into a magnified K; see rectify::inscribed_pinhole).
+        intrinsics: geometry.pipeline.intrinsics,
         calibration_size,
         external_poses: &external_poses,
         anchor_poses: anchor_poses.as_ref().map(|(t, p)| (t.as_str(), p.as_slice())),

@@ -651,12 +651,12 @@ mod geometry {
         Ok((frames, report, out.into_inner()))
     }
 
-    /// Frame 0 as the pipeline should see it: rendered directly through the undistorted colour
-    /// camera (colour, and the true depth along its rays).
+    /// Frame 0 as the pipeline should see it: rendered directly through the pinhole camera
+    /// the colour camera is undistorted into (colour, and the true depth along its rays).
     fn pinhole_truth(rig: &RgbdRig) -> SyntheticFrame {
         let sequence = SyntheticSequence::new(Scenario::TwoObjectsCrossing, config());
         let mut frame = SyntheticFrame::empty(rig.color.size);
-        let pinhole = rig.color.undistorted();
+        let pinhole = occmask::registration::inscribed_pinhole(&rig.color);
         sequence.render_camera_into(0, 0.0, &sequence.world_from_camera(0), &pinhole, true, &mut frame);
         frame
     }
@@ -667,7 +667,7 @@ mod geometry {
     /// but never invent one), and the fraction with any depth.
     fn depth_agreement(rig: &RgbdRig, depth: &DepthMeters, truth: &DepthMeters) -> (f64, f64) {
         let size = truth.size();
-        let pinhole = rig.color.undistorted();
+        let pinhole = occmask::registration::inscribed_pinhole(&rig.color);
         let (mut seen, mut good, mut valid) = (0.0, 0.0, 0.0);
         for y in 0..size.height {
             for x in 0..size.width {
@@ -784,19 +784,22 @@ mod geometry {
             "/m",
         )
         .unwrap();
-        let pinhole = rig.color.undistorted();
+        let pinhole = occmask::registration::inscribed_pinhole(&rig.color);
         let quarter = rig.color.size.width * 3 / 4;
         let (mut wrong, mut moved) = (0, 0);
         for y in 0..mask.height() {
             for x in 0..mask.width() {
                 // The processor marked pinhole columns ≥ 3/4 of the width; a published pixel is
                 // set where its ray lands there.
-                let (px, _) = rig
+                let (px, py) = rig
                     .color
                     .ray(x as f64, y as f64)
                     .map(|(rx, ry)| pinhole.pixel(rx, ry))
                     .unwrap();
-                let expected = px.round() >= quarter as f64;
+                // Published pixels beyond the pipeline's (magnified) pinhole image are never set.
+                let (w, h) = (mask.width() as f64, mask.height() as f64);
+                let seen = px >= -0.5 && py >= -0.5 && px <= w - 0.5 && py <= h - 0.5;
+                let expected = seen && px.round() >= quarter as f64;
                 if (mask.get(x, y) == MASK_SET) != expected {
                     wrong += 1;
                 }

@@ -6,7 +6,8 @@
 //! - Colour with lens distortion is undistorted (bilinear remap), unless switched off.
 //! - Depth already aligned to colour (the recording says so: a topic such as
 //!   `aligned_depth_to_color`, `--depth-aligned`, or the same `frame_id`, size and
-//!   calibration as colour) is only undistorted with the colour image (nearest pixel).
+//!   calibration as colour) is only undistorted with the colour image (interpolated on one
+//!   surface, never across a depth edge).
 //! - Depth from another camera (another size, calibration or `frame_id`) is registered into
 //!   the colour camera ([`crate::registration::DepthRegistration`]) with both calibrations and
 //!   `color_from_depth` from `--depth-to-color` or the file's transforms.
@@ -26,7 +27,9 @@ use crate::mcap_io::input::decode::CalibrationMsg;
 use crate::mcap_io::input::detect::RgbdTopics;
 use crate::mcap_io::input::transforms::{find_transform, normalize_frame};
 use crate::mcap_io::input::McapInput;
-use crate::registration::{distortion_map, undistortion_maps, BilinearMap, DepthRegistration, NearestMap};
+use crate::registration::{
+    distortion_map, inscribed_pinhole, undistortion_map, BilinearMap, DepthRegistration, NearestMap,
+};
 
 /// Words in a depth topic that mean "registered to the colour camera" in the usual drivers:
 /// RealSense (`aligned_depth_to_color`), OpenNI/Orbbec (`depth_registered`), Azure Kinect
@@ -72,6 +75,9 @@ pub struct InputGeometry {
     pub depth_frame: String,
     /// Undistort colour (it has distortion and undistortion is not switched off).
     pub undistort_color: bool,
+    /// The pinhole camera the pipeline sees: [`inscribed_pinhole`] of the colour camera when
+    /// undistorting, else the colour camera without its distortion.
+    pub pipeline: CameraModel,
     /// Depth.
     pub depth: DepthGeometry,
 }
@@ -171,11 +177,17 @@ pub fn plan_geometry(
         found,
         needed,
     };
+    let undistort_color = color_camera.distortion.is_some() && !options.no_undistort;
     let plan = |depth_geometry| InputGeometry {
         color: color_camera,
         color_frame: color.frame_id.clone(),
         depth_frame: depth.frame_id.clone(),
-        undistort_color: color_camera.distortion.is_some() && !options.no_undistort,
+        undistort_color,
+        pipeline: if undistort_color {
+            inscribed_pinhole(&color_camera)
+        } else {
+            color_camera.undistorted()
+        },
         depth: depth_geometry,
     };
     let aligned = |reason: String| -> Result<InputGeometry> {
@@ -330,9 +342,13 @@ impl InputGeometry {
                 match (self.color.distortion.is_some(), self.undistort_color) {
                     (false, _) => "none (pinhole calibration)".to_owned(),
                     (true, true) => {
-                        "undistorted to the pinhole camera with the same K; masks mapped back to the \
-                         published pixels"
-                            .to_owned()
+                        let k = self.pipeline.intrinsics;
+                        format!(
+                            "undistorted to the pinhole camera fx {} fy {} cx {} cy {} (the smallest \
+                             magnification of K with data at every pixel); masks mapped back to the \
+                             published pixels",
+                            k.fx, k.fy, k.cx, k.cy
+                        )
                     }
                     (true, false) => "off (--no-undistort): distortion ignored".to_owned(),
                 },
@@ -405,9 +421,8 @@ impl InputGeometry {
 pub struct Rectifier {
     color_size: ImageSize,
     depth_size: ImageSize,
-    /// Undistorts grey; with depth aligned to the distorted colour, `depth_map` does depth.
-    gray_map: Option<BilinearMap>,
-    depth_map: Option<NearestMap>,
+    /// Undistorts grey, and depth when it is aligned to the distorted colour.
+    undistort: Option<BilinearMap>,
     registration: Option<DepthRegistration>,
     /// The decoded images, when they are rectified into the caller's buffers.
     gray_in: GrayF32,
@@ -426,15 +441,13 @@ impl Rectifier {
     /// # Errors
     /// [`Error::InvalidParameter`] for images too small or too large for the tables.
     pub fn new(geometry: &InputGeometry) -> Result<(Self, Publisher)> {
-        let (gray_map, depth_map, back_map) = if geometry.undistort_color {
-            let (gray_map, depth_map) = undistortion_maps(&geometry.color)?;
+        let (undistort, back_map) = if geometry.undistort_color {
             (
-                Some(gray_map),
-                Some(depth_map),
-                Some(distortion_map(&geometry.color)?),
+                Some(undistortion_map(&geometry.color, &geometry.pipeline)?),
+                Some(distortion_map(&geometry.color, &geometry.pipeline)?),
             )
         } else {
-            (None, None, None)
+            (None, None)
         };
         let registration = match &geometry.depth {
             DepthGeometry::Aligned { .. } => None,
@@ -444,7 +457,7 @@ impl Rectifier {
                 ..
             } => Some(DepthRegistration::new(
                 depth,
-                &geometry.color.undistorted(),
+                &geometry.pipeline,
                 color_from_depth,
                 1,
             )?),
@@ -452,8 +465,7 @@ impl Rectifier {
         let rectifier = Self {
             color_size: geometry.color.size,
             depth_size: geometry.depth_size(),
-            depth_map: if registration.is_some() { None } else { depth_map },
-            gray_map,
+            undistort,
             registration,
             gray_in: GrayF32::filled(ImageSize::default(), 0.0),
             depth_in: DepthMeters::filled(ImageSize::default(), 0.0),
@@ -476,7 +488,7 @@ impl Rectifier {
         gray: &mut GrayF32,
         decode: impl FnOnce(&mut GrayF32) -> Result<()>,
     ) -> Result<f64> {
-        let decoded = if self.gray_map.is_some() {
+        let decoded = if self.undistort.is_some() {
             &mut self.gray_in
         } else {
             &mut *gray
@@ -484,7 +496,7 @@ impl Rectifier {
         decode(decoded)?;
         check_size(topic, "colour", self.color_size, decoded.size())?;
         let start = Instant::now();
-        if let Some(map) = &self.gray_map {
+        if let Some(map) = &self.undistort {
             resize(gray, self.color_size);
             map.apply_serial(&self.gray_in, gray)?;
         }
@@ -505,7 +517,7 @@ impl Rectifier {
         depth_m: &mut DepthMeters,
         decode: impl FnOnce(&mut DepthMeters) -> Result<()>,
     ) -> Result<f64> {
-        let rectified = self.registration.is_some() || self.depth_map.is_some();
+        let rectified = self.registration.is_some() || self.undistort.is_some();
         let decoded = if rectified {
             &mut self.depth_in
         } else {
@@ -517,14 +529,14 @@ impl Rectifier {
         if let Some(registration) = &mut self.registration {
             resize(depth_m, self.color_size);
             registration.register_into(&self.depth_in, depth_m)?;
-            if let Some(map) = &self.gray_map {
+            if let Some(map) = &self.undistort {
                 // Pinhole pixels whose colour lies outside the published image have only a
                 // clamped border colour: their depth must not be used.
                 map.clear_outside(depth_m, 0.0)?;
             }
-        } else if let Some(map) = &self.depth_map {
+        } else if let Some(map) = &self.undistort {
             resize(depth_m, self.color_size);
-            map.apply_serial(&self.depth_in, depth_m)?;
+            map.apply_depth_serial(&self.depth_in, depth_m)?;
         }
         Ok(start.elapsed().as_secs_f64())
     }
