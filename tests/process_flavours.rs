@@ -375,13 +375,13 @@ fn errors_name_what_to_fix() {
     let dir = tempfile::tempdir().unwrap();
     // Unsupported colour encoding: named, with the supported list.
     let spec = FixtureSpec {
-        ros_color_encoding: "yuv422",
+        ros_color_encoding: "nv12",
         ..Default::default()
     };
     let path = write_input(dir.path(), Flavor::Ros2, &spec);
     let err = run(&path, &ProcessConfig::default()).unwrap_err().to_string();
     assert!(
-        err.contains("yuv422") && err.contains("bgr8") && err.contains(COLOR_TOPIC),
+        err.contains("nv12") && err.contains("bgr8") && err.contains(COLOR_TOPIC),
         "{err}"
     );
 

@@ -45,7 +45,8 @@ pub struct FixtureSpec {
     pub depth_lag_ns: u64,
     /// Write the summary's chunk indexes (false = linear fallback).
     pub indexed: bool,
-    /// Colour image encoding for the ROS flavour (`bgr8`, `rgb8`, `yuv422`, ...).
+    /// Colour image encoding for the ROS flavour (`bgr8`, `rgb8`; others are written as
+    /// `bgr8` bytes under that name, for unsupported-encoding errors).
     pub ros_color_encoding: &'static str,
     /// Calibration messages.
     pub with_calibration: bool,
@@ -282,14 +283,13 @@ fn color_msg(flavor: Flavor, spec: &FixtureSpec, i: usize, stamp: u64) -> Vec<u8
         .unwrap(),
         Flavor::Ros2 | Flavor::Ros1 => {
             let enc = spec.ros_color_encoding;
-            let bpp = if enc == "yuv422" { 2 } else { 3 };
+            let bpp = 3;
             let mut data = Vec::with_capacity(size.area() * bpp);
             for y in 0..size.height {
                 for x in 0..size.width {
                     let [r, g, b] = rgb_pixel(i, x, y);
                     match enc {
                         "rgb8" => data.extend_from_slice(&[r, g, b]),
-                        "yuv422" => data.extend_from_slice(&[r, g]),
                         _ => data.extend_from_slice(&[b, g, r]),
                     }
                 }

@@ -17,6 +17,7 @@ mod cdr_read;
 pub mod decode;
 pub mod detect;
 pub mod json;
+pub mod pixels;
 pub mod ros1;
 pub mod ros2;
 pub mod transforms;
