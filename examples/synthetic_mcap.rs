@@ -3,7 +3,7 @@
 //! objects.
 //!
 //! usage: cargo run --release --example synthetic_mcap -- OUT_DIR [--rig RIG] [--ros1|--ros2]
-//!        [--frames N] [--sensor kinect|ideal|unquantised] [SCENARIO...]
+//!        [--frames N] [--seed N] [--sensor kinect|ideal|unquantised] [SCENARIO...]
 //!
 //! Without `--rig`, files are `occmask convert`'s layout (Foxglove protobuf, 640×480,
 //! registered pinhole). With `--rig`, files are ROS 2 recordings (or ROS 1 with `--ros1`) laid
@@ -44,6 +44,7 @@ fn main() -> anyhow::Result<()> {
     );
     let (mut rig_name, mut version, mut frames, mut wanted) = (None, RosVersion::Ros2, None, Vec::new());
     let mut sensor = DepthSensorModel::default();
+    let mut seed = SequenceConfig::default().seed;
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--rig" => {
@@ -55,6 +56,7 @@ fn main() -> anyhow::Result<()> {
             "--ros1" => version = RosVersion::Ros1,
             "--ros2" => version = RosVersion::Ros2,
             "--frames" => frames = Some(args.next().context("--frames N")?.parse::<usize>()?),
+            "--seed" => seed = args.next().context("--seed N")?.parse::<u64>()?,
             "--sensor" => {
                 sensor = match args.next().as_deref() {
                     Some("kinect") => DepthSensorModel::default(),
@@ -73,6 +75,7 @@ fn main() -> anyhow::Result<()> {
     let config = SequenceConfig {
         frame_count: frames,
         sensor,
+        seed,
         ..SequenceConfig::default()
     };
     let rig = match rig_name.as_deref() {
