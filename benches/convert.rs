@@ -1,9 +1,9 @@
-//! Conversion throughput on ../shared/data/tum_fr2_desk_50 (50 VGA RGB-D pairs, 792 poses):
+//! Conversion throughput on the TUM fr2_desk excerpt in fixtures/ (10 VGA RGB-D pairs, 154 poses):
 //! the whole converter into memory with each compression, against reading the same files
 //! (the in-process equivalent of `cat`) and decoding the depth PNGs alone.
 //!
 //! `cargo bench --bench convert`; throughput is in bytes of image files read, so MB/s is
-//! comparable with `cat`; frames/s = 50 / time. tools/bench_convert.sh measures the binary
+//! comparable with `cat`; frames/s = 10 / time. tools/bench_convert.sh measures the binary
 //! end to end (peak RSS, ratio to `cat`).
 
 use std::io::Cursor;
@@ -16,7 +16,7 @@ use occmask::dataset::{self, DatasetKind, Sequence, DEFAULT_MAX_PAIR_GAP_NS};
 use occmask::mcap_io::{Compression, McapWriteOptions};
 use rayon::prelude::*;
 
-/// Criterion's minimum sample count: one iteration reads ~33 MB, so keep runs short.
+/// Criterion's minimum sample count: one iteration reads ~6.5 MB, so keep runs short.
 const SAMPLES: usize = 10;
 
 fn image_paths(seq: &Sequence) -> Vec<PathBuf> {
@@ -28,12 +28,8 @@ fn image_paths(seq: &Sequence) -> Vec<PathBuf> {
 }
 
 fn bench_convert(c: &mut Criterion) {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/tum_fr2_desk_50");
-    if !root.is_dir() {
-        eprintln!("skipping the conversion benchmark: {} is missing", root.display());
-        return;
-    }
-    let seq = dataset::tum::load(&root, DatasetKind::Tum).expect("tum_fr2_desk_50 must load");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/tum_fr2_desk_10");
+    let seq = dataset::tum::load(&root, DatasetKind::Tum).expect("the fixture must load");
     let paths = image_paths(&seq);
     let input_bytes: u64 = paths
         .iter()
@@ -52,7 +48,7 @@ fn bench_convert(c: &mut Criterion) {
         command_line: "bench".into(),
     };
 
-    let mut group = c.benchmark_group("convert_tum_fr2_desk_50");
+    let mut group = c.benchmark_group("convert_tum_fr2_desk_10");
     group.sample_size(SAMPLES);
     group.throughput(Throughput::Bytes(input_bytes));
     group.bench_function("read_files_only (cat)", |b| {

@@ -1,8 +1,8 @@
 //! DVO stages at 640×480: pyramid build, one LM iteration per level (normal equations at a pose
 //! + the damped 6×6 solve), and a whole frame pair with the default config.
 //!
-//! Uses two consecutive frames of `../shared/data/tum_fr2_desk_50` when present (realistic
-//! depth holes and iteration counts), else a generated textured scene.
+//! Uses two consecutive frames of the TUM fr2_desk excerpt in `fixtures/` (realistic depth holes
+//! and iteration counts), else a generated textured scene.
 //! Run: `cargo bench --bench dvo` (add `-- --quick` for a short run).
 
 // A benchmark's setup failing is a bug in the benchmark: panicking is the right report.
@@ -10,6 +10,9 @@
 
 #[path = "../tests/common/tum.rs"]
 mod tum;
+
+#[path = "../tests/common/data.rs"]
+mod data;
 
 use std::hint::black_box;
 
@@ -21,13 +24,12 @@ use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
 use occmask::pyramid::ImagePyramid;
 
 fn frames() -> [(GrayF32, DepthMeters); 2] {
-    let dir = tum::shared_data("tum_fr2_desk_50");
-    if let Ok((paths, _)) = tum::load_sequence(&dir) {
-        if let (Ok(a), Ok(b)) = (tum::load_frame(&paths[10]), tum::load_frame(&paths[11])) {
+    if let Ok((paths, _)) = tum::load_sequence(&data::tum_fixture()) {
+        if let (Ok(a), Ok(b)) = (tum::load_frame(&paths[8]), tum::load_frame(&paths[9])) {
             return [a, b];
         }
     }
-    eprintln!("tum_fr2_desk_50 not found: benchmarking a generated scene");
+    eprintln!("fixtures/tum_fr2_desk_10 not found: benchmarking a generated scene");
     let size = ImageSize::new(640, 480);
     let make = |shift: f32| {
         let gray = GrayF32::from_fn(size, |x, y| {
@@ -68,11 +70,7 @@ fn bench(c: &mut Criterion) {
             size: lv.size(),
             intrinsics: lv.intrinsics,
         };
-        let cost = residuals::CostParams {
-            k_intensity: config.k_intensity.at_level(level),
-            k_depth_m: config.k_depth_m,
-            depth_weight: config.depth_weight_gamma,
-        };
+        let cost = config.cost_at_level(level);
         let points = estimator.reference_points(level);
         group.bench_function(format!("lm_iteration_level{level}_{}pts", points.len()), |b| {
             b.iter(|| {

@@ -3,7 +3,7 @@
 //! (appearance-gated object completion on). `occlusion_update_paper` runs the same frames at
 //! 640×480 with the completion off (the paper's detector): the difference is that stage's cost.
 //! `occlusion_update_starting_object` runs the still-then-moving frames where the completion
-//! grows the most (frames 31–46: a box starting to move). Target (issue 4): ≤ 3 ms per 640×480
+//! grows the most (frames 31–46: a box starting to move). Target: ≤ 3 ms per 640×480
 //! frame. Run: `cargo bench --bench occlusion` (add `-- --quick` for a short run).
 
 // A benchmark's setup failing is a bug in the benchmark: panicking is the right report.

@@ -1,5 +1,5 @@
 //! Detector + DVO per frame (the closed loop of `pipeline::Processor`) on the synthetic
-//! dominant-object sequence at 640×480. Target (issue 4): ≥ 50 frames per second.
+//! dominant-object sequence at 640×480. Target: ≥ 50 frames per second.
 //! Run: `cargo bench --bench pipeline` (add `-- --quick` for a short run).
 
 // A benchmark's setup failing is a bug in the benchmark: panicking is the right report.
@@ -22,7 +22,7 @@ fn closed_loop(c: &mut Criterion) {
     let frames: Vec<SyntheticFrame> = (40..70).map(|i| sequence.frame(i)).collect();
     let mut group = c.benchmark_group("pipeline_frame");
     for (name, source) in [
-        ("dvo_closed_loop", PoseSource::DvoClosedLoop(Default::default())),
+        ("dvo_closed_loop", PoseSource::DvoClosedLoop),
         (
             "external_pose",
             PoseSource::External {
@@ -49,6 +49,7 @@ fn closed_loop(c: &mut Criterion) {
                         gray: &f.gray,
                         depth_m: &f.depth_m,
                         world_from_marker: Some(&f.world_from_camera),
+                        ignore_in_previous: None,
                     })
                     .unwrap();
                 black_box(out.stats.moving_fraction);

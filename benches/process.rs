@@ -1,5 +1,5 @@
 //! End-to-end `process` throughput, MCAP in → MCAP out with DVO (closed loop) + detector at
-//! 640×480, on ../shared/data/tum_fr2_desk_50 converted to MCAP in memory first, through the
+//! 640×480, on the TUM fr2_desk excerpt in fixtures/ converted to MCAP in memory first, through the
 //! same batch runner as `occmask process a b …` (`process::batch`: each file in flight on its
 //! own rayon pool with its share of the cores): one file with all cores and with one thread,
 //! two files one after the other and side by side, four files side by side.
@@ -19,7 +19,7 @@ use occmask::mcap_io::McapWriteOptions;
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::{pipeline_factory, process_file, NoHooks, PipelineOptions, ProcessConfig};
 
-/// Criterion's minimum sample count: one iteration processes 50 VGA frames.
+/// Criterion's minimum sample count: one iteration processes the excerpt's 10 VGA frames.
 const SAMPLES: usize = 10;
 
 fn process_once(input: &McapInput) -> u64 {
@@ -36,12 +36,8 @@ fn process_once(input: &McapInput) -> u64 {
 }
 
 fn bench_process(c: &mut Criterion) {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/tum_fr2_desk_50");
-    if !root.is_dir() {
-        eprintln!("skipping the process benchmark: {} is missing", root.display());
-        return;
-    }
-    let seq = dataset::tum::load(&root, DatasetKind::Tum).expect("tum_fr2_desk_50 must load");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/tum_fr2_desk_10");
+    let seq = dataset::tum::load(&root, DatasetKind::Tum).expect("the fixture must load");
     let config = ConvertConfig {
         intrinsics: resolve_intrinsics(DatasetKind::Tum, &seq.name, None).expect("fr2 preset"),
         depth_units_per_meter: dataset::TUM_DEPTH_UNITS_PER_METER,
@@ -64,7 +60,7 @@ fn bench_process(c: &mut Criterion) {
     let frames = process_once(&input);
 
     let cores = available_cores();
-    let mut group = c.benchmark_group("process_tum_fr2_desk_50");
+    let mut group = c.benchmark_group("process_tum_fr2_desk_10");
     group.sample_size(SAMPLES);
     // name, files, --jobs, --threads-per-file (None = the default split of the cores)
     let cases: [(&str, usize, Option<usize>, Option<usize>); 5] = [

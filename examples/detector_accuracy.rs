@@ -17,7 +17,7 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
-use occmask::dvo::{DvoConfig, DvoStatus};
+use occmask::dvo::DvoStatus;
 use occmask::geometry::PinholeIntrinsics;
 use occmask::image_buf::{depth_m_from_u16_into, gray_from_rgb8, DepthMeters, Image, ImageSize, Mask};
 use occmask::metrics::{rpe, FrameCounts, SegmentationTally};
@@ -137,7 +137,7 @@ fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path
         SIZE,
         config.intrinsics(),
         ProcessorConfig {
-            pose_source: PoseSource::DvoClosedLoop(DvoConfig::default()),
+            pose_source: PoseSource::DvoClosedLoop,
             occlusion: detector_config(),
             ..ProcessorConfig::default()
         },
@@ -160,6 +160,7 @@ fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path
                     gray: &frame.gray,
                     depth_m: &frame.depth_m,
                     world_from_marker: None,
+                    ignore_in_previous: None,
                 })
                 .unwrap();
             motion = out.current_from_previous;
@@ -416,6 +417,7 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
                 gray: &gray,
                 depth_m: &depth,
                 world_from_marker: None,
+                ignore_in_previous: None,
             })
             .unwrap();
         not_converged += usize::from(out.stats.dvo.is_some_and(|d| d.status != DvoStatus::Converged));

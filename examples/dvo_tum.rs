@@ -3,7 +3,7 @@
 //! (stdout or `--csv FILE`), plus the chained trajectory in TUM format (`--tum FILE`).
 //!
 //! ```sh
-//! cargo run --release --example dvo_tum -- ../shared/data/tum_fr2_desk_50 --csv /tmp/ours.csv
+//! cargo run --release --example dvo_tum -- fixtures/tum_fr2_desk_10 --csv /tmp/ours.csv
 //! cargo run --release --example dvo_tum -- DIR --finest 0 --profile release --tum /tmp/traj.txt
 //! ```
 //! Frames are decoded before timing starts; "ms" is the wall time of `DvoTracker::track` (pyramid

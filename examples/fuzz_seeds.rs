@@ -1,4 +1,4 @@
-//! Writes the seed corpora of the cargo-fuzz targets (fuzz/, README "Fuzzing"): valid
+//! Writes the seed corpora of the cargo-fuzz targets (fuzz/README.md): valid
 //! messages of every decoded type, produced by occmask's own writers and serde structs, so
 //! the fuzzer starts from meaningful inputs instead of random bytes.
 //!

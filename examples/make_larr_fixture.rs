@@ -2,7 +2,7 @@
 //! (CC BY 4.0; see fixtures/README.md). Run from the repository root:
 //!
 //! ```sh
-//! cargo run --example make_larr_fixture -- ../shared/data/tum_fr2_desk_50 fixtures/larr_fr2_desk_mini
+//! cargo run --example make_larr_fixture -- fixtures/tum_fr2_desk_10 fixtures/larr_fr2_desk_mini
 //! ```
 //!
 //! Colour is box-averaged 4×4 (640×480 → 160×120), depth is subsampled (top-left pixel of each
@@ -53,7 +53,9 @@ fn inside(polygon: &[(f64, f64)], x: f64, y: f64) -> bool {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let [_, src, dst] = &args[..] else {
-        return Err("usage: make_larr_fixture <tum_fr2_desk_50 dir> <output dir>".into());
+        return Err(
+            "usage: make_larr_fixture <TUM fr2_desk dir, e.g. fixtures/tum_fr2_desk_10> <output dir>".into(),
+        );
     };
     let (src, dst) = (Path::new(src), PathBuf::from(dst));
     let color = read_image_list(&src.join("rgb.txt"), src)?;

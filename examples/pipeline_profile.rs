@@ -1,7 +1,8 @@
 //! Where the closed loop's time goes: the `Processor` (DVO closed loop + detector) on the frames
 //! of `benches/pipeline.rs` (synthetic dominant-object sequence, frames 40–70, 640×480), then
 //! DVO level by level (points, LM iterations, stop reason, time) on the same pairs with the
-//! same ignore masks, and on consecutive `tum_fr2_desk_50` pairs for comparison. Run:
+//! same ignore masks, and on the consecutive pairs of the TUM fr2_desk excerpt in `fixtures/` for
+//! comparison. Run:
 //! `cargo run --release --example pipeline_profile [-- ROUNDS]` (RAYON_NUM_THREADS=1 for one core).
 
 // A profiling tool: a failing setup is a bug worth a panic.
@@ -9,6 +10,9 @@
 
 #[path = "../tests/common/tum.rs"]
 mod tum;
+
+#[path = "../tests/common/data.rs"]
+mod data;
 
 use std::time::Instant;
 
@@ -76,11 +80,7 @@ fn per_level(
                     size: lv.size(),
                     intrinsics: lv.intrinsics,
                 };
-                let cost = residuals::CostParams {
-                    k_intensity: cfg.k_intensity.at_level(l),
-                    k_depth_m: cfg.k_depth_m,
-                    depth_weight: cfg.depth_weight_gamma,
-                };
+                let cost = cfg.cost_at_level(l);
                 let schedule = LmSchedule {
                     lambda_initial: cfg.lm_lambda_initial,
                     lambda_up: cfg.lm_lambda_up,
@@ -98,6 +98,7 @@ fn per_level(
                     &target,
                     &cost,
                     &schedule,
+                    None,
                     &mut level_pose,
                 );
                 let tot = &mut totals[l];
@@ -168,7 +169,7 @@ fn main() {
     let sequence = SyntheticSequence::new(Scenario::DominantObject, config);
     let synthetic: Vec<_> = (40..70).map(|i| sequence.frame(i)).collect();
     let processor_config = ProcessorConfig {
-        pose_source: PoseSource::DvoClosedLoop(DvoConfig::default()),
+        pose_source: PoseSource::DvoClosedLoop,
         ..ProcessorConfig::default()
     };
     let mut processor = Processor::new(size, config.intrinsics(), processor_config).unwrap();
@@ -185,6 +186,7 @@ fn main() {
                     gray: &f.gray,
                     depth_m: &f.depth_m,
                     world_from_marker: Some(&f.world_from_camera),
+                    ignore_in_previous: None,
                 })
                 .unwrap();
             masks[k] = Some(out.mask.clone());
@@ -232,16 +234,11 @@ fn main() {
         &frames,
         rounds,
     );
-    let dir = tum::shared_data("tum_fr2_desk_50");
-    if let Ok((paths, _)) = tum::load_sequence(&dir) {
-        let tum_frames: Vec<_> = paths
-            .iter()
-            .take(30)
-            .map(|p| tum::load_frame(p).unwrap())
-            .collect();
+    if let Ok((paths, _)) = tum::load_sequence(&data::tum_fixture()) {
+        let tum_frames: Vec<_> = paths.iter().map(|p| tum::load_frame(p).unwrap()).collect();
         let pairs: Vec<_> = (1..tum_frames.len()).map(|k| (k - 1, k, None)).collect();
         per_level(
-            "tum_fr2_desk_50 frames 0–29",
+            "tum_fr2_desk_10 (fixtures/)",
             size,
             presets::TUM_FR2,
             &pairs,

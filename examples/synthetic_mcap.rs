@@ -1,6 +1,6 @@
 //! Writes synthetic RGB-D scenarios (src/synthetic.rs: exact ground-truth masks and poses) as
 //! MCAP files, so `occmask process` + `occmask eval` can be scored on sequences with moving
-//! objects.
+//! objects and exact ground-truth masks (no real sequence here has them).
 //!
 //! usage: cargo run --release --example synthetic_mcap -- OUT_DIR [--rig RIG] [--ros1|--ros2]
 //!        [--frames N] [--seed N] [--sensor kinect|ideal|unquantised] [SCENARIO...]

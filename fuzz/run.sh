@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Runs occmask's cargo-fuzz targets (README "Fuzzing").
+# Runs occmask's cargo-fuzz targets (fuzz/README.md).
 #
 #   fuzz/run.sh [SECONDS_PER_TARGET] [TARGET...]      default: 600 s, every target
 #

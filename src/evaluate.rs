@@ -1,5 +1,5 @@
 //! `occmask eval`: scores an output of `occmask process` against the ground truth in the same
-//! file (algorithm.md §7).
+//! file (docs/method.md, "Evaluation").
 //!
 //! - Segmentation: each `/occmask/mask` is compared with the `/groundtruth/mask` of the same
 //!   stamp; F1, precision and recall are averaged over frames with a non-empty ground truth
@@ -26,7 +26,7 @@ use crate::metrics::segmentation::{SegmentationSummary, SegmentationTally};
 use crate::metrics::trajectory::{ate, rpe_stamped, AteStats, RpeStats};
 use crate::trajectory::{interpolate, StampedPose};
 
-/// The paper's long RPE interval: 150 frames, "drift per 5 s at 30 Hz" (algorithm.md §7.2).
+/// The paper's long RPE interval: 150 frames, "drift per 5 s at 30 Hz".
 pub const LONG_RPE_DELTA_FRAMES: usize = 150;
 /// Masks waiting for their partner are dropped once the newest stamp is this far ahead: the
 /// two topics are written together, so partners are never further apart in a file.

@@ -2,7 +2,7 @@
 //!
 //! `Image<T>` is a plain `width × height` row-major buffer (no padding, no channels
 //! dimension: multi-channel pixels are arrays such as `[u8; 3]`). Pixel (x, y) is column x,
-//! row y, 0-based, stored at `y * width + x` (algorithm.md §0).
+//! row y, 0-based, stored at `y * width + x` (docs/method.md, "Conventions").
 
 use std::fmt;
 
@@ -172,7 +172,7 @@ impl<T: Copy> Image<T> {
     }
 }
 
-/// Luma weights of ITU-R BT.601 (what Matlab's `rgb2gray` uses, algorithm.md §2).
+/// Luma weights of ITU-R BT.601 (what Matlab's `rgb2gray`, and so the authors' release, uses).
 pub const LUMA_WEIGHTS_BT601: [f32; 3] = [0.2989, 0.5870, 0.1140];
 
 /// Writes the gray intensity in [0, 1] of `rgb` into `gray` (caller-owned, same size).

@@ -25,6 +25,7 @@ pub mod pipeline;
 pub mod process;
 pub mod pyramid;
 pub mod registration;
+pub(crate) mod serde_util;
 pub mod synthetic;
 pub mod time;
 pub mod trajectory;

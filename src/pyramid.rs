@@ -1,18 +1,18 @@
 //! Gray + depth image pyramids for dense visual odometry, preallocated once per sequence.
 //!
 //! Level 0 is the input resolution; level ℓ is 2^ℓ times smaller (odd sizes are cropped, as
-//! Matlab's release does, algorithm.md §4.1 b). Per level the pyramid holds:
+//! the authors' Matlab release does). Per level the pyramid holds:
 //! - `gray`: 2×2 box mean of the finer level (values in [0, 1]);
 //! - `depth_m`: an *edge-aware* 2×2 mean (see [`downsample_depth_into`]); 0 = invalid;
 //! - `samples`: one packed [`TargetSample`] per pixel (intensity, its gradient, depth, its
 //!   gradient) so that the DVO kernel reads all six values of a bilinear corner with one
-//!   cache line, the dvo_slam layout (algorithm.md §4.3);
+//!   cache line, the layout of Kerl et al.'s dvo_slam;
 //! - the intrinsics of the level ([`PinholeIntrinsics::at_level`]: the 2×2 box mean puts coarse
 //!   pixel j at fine coordinate 2j + 0.5).
 //!
 //! # Depth pyramid choice
 //! A plain mean of the valid children blends foreground and background at depth edges and
-//! creates depths where no surface exists (algorithm.md §4.1 b does this); plain subsampling
+//! creates depths where no surface exists (the authors' release does this); plain subsampling
 //! (dvo_slam) avoids that but samples fine pixel 2j, half a pixel away from where the intensity
 //! mean and the scaled intrinsics put coarse pixel j. Here a coarse depth is the mean of those
 //! valid children that lie within [`DEPTH_EDGE_RELATIVE`] of the *nearest* valid child: on a

@@ -7,7 +7,7 @@
 //! area, as a camera pixel integrates light ([`SequenceConfig::colour_samples_per_axis`]
 //! stratified, jittered samples per axis): point-sampling the texture at pixel centres aliases
 //! its fine detail on the grazing floor and ceiling into patterns that do not move with the
-//! scene, which biased DVO by 1–2 mm (README, "Dense visual odometry"). The sensor model imitates a Kinect-style
+//! scene, which biased DVO by 1–2 mm (docs/accuracy.md, "DVO"). The sensor model imitates a Kinect-style
 //! structured-light camera: Gaussian depth noise whose σ grows with Z², disparity quantisation,
 //! the 1/5000 m storage quantisation of TUM-style PNGs, invalid depth along depth edges, on an
 //! image border ring and outside the sensing range.
@@ -19,7 +19,7 @@
 //! # Frames
 //! The world frame is "optical-like": +x right, +y **down** (the floor is at +y), +z forward
 //! from the initial camera. `world_from_camera` is the usual camera-to-world pose
-//! (algorithm.md §0 conventions, [`crate::geometry`]).
+//! (docs/method.md "Conventions", [`crate::geometry`]).
 //!
 //! # Ground-truth mask
 //! A pixel is set in [`SyntheticFrame::gt_mask`] when the first surface hit is a box that moved
@@ -131,7 +131,7 @@ pub struct SequenceConfig {
     /// n × n samples, one at a random (per frame and pixel, deterministic) position in each cell
     /// of an n × n grid over the pixel, each cast as its own ray (silhouette pixels mix both
     /// surfaces, as a real pixel does). 1 samples the pixel centre only (the point-sampling
-    /// renderer of session 1). Depth and the ground-truth mask always come from the centre ray.
+    /// renderer this replaced). Depth and the ground-truth mask always come from the centre ray.
     pub colour_samples_per_axis: usize,
     /// Number of frames; `None` uses the scenario's default length.
     pub frame_count: Option<usize>,

@@ -1,4 +1,4 @@
-//! The bad-input corpus (issue 6): damaged MCAP files and dataset folders, generated in code,
+//! The bad-input corpus (docs/errors.md): damaged MCAP files and dataset folders, generated in code,
 //! run through the real binary (`process`, `eval`, `convert`). Every case checks the exit
 //! code, a one-line message naming the file, the topic or frame and what was expected, that
 //! nothing panicked, that no output (or temporary file) is left behind, and that the input
@@ -22,6 +22,8 @@ use occmask::image_buf::ImageSize;
 use process_support::{fixture_bytes, FixtureSpec, Flavor, FRAME_NS, T0_NS};
 use prost::Message as _;
 
+#[cfg(unix)]
+use common::assert_ends_quietly_on_a_closed_pipe;
 use common::{entries, occmask, stderr, tum_from_fixture};
 
 /// Big enough for the DVO pyramid, small enough to be quick (8 frames).
@@ -167,6 +169,8 @@ enum Expect {
     Fails(&'static [&'static str]),
     /// Exit 0, output written, every needle in a `warning:` line.
     Warns(&'static [&'static str]),
+    /// Exit 3 (finished, but input was lost), output written, every needle in a `warning:` line.
+    LosesInput(&'static [&'static str]),
     /// Exit 0, output written, no warning.
     Ok,
 }
@@ -210,8 +214,13 @@ fn check(
             );
             assert!(left.is_empty(), "{name}: left behind {left:?}: {err}");
         }
-        Expect::Warns(needles) => {
-            assert_eq!(out.status.code(), Some(0), "{name}: expected exit 0: {err}");
+        Expect::Warns(needles) | Expect::LosesInput(needles) => {
+            let code = if matches!(expect, Expect::Warns(_)) { 0 } else { 3 };
+            assert_eq!(
+                out.status.code(),
+                Some(code),
+                "{name}: expected exit {code}: {err}"
+            );
             assert!(
                 err.lines()
                     .any(|l| l.starts_with("warning: ") && needles.iter().all(|n| l.contains(n))),
@@ -292,7 +301,7 @@ fn process_cases() -> Vec<ProcessCase> {
                 b[..(start + len / 2) as usize].to_vec()
             },
             extra: &[],
-            expect: Expect::Warns(&[
+            expect: Expect::LosesInput(&[
                 "in.mcap",
                 "ends early",
                 "bytes (an incomplete record at byte",
@@ -308,7 +317,7 @@ fn process_cases() -> Vec<ProcessCase> {
                 b[..(start + len / 2) as usize].to_vec()
             },
             extra: &[],
-            expect: Expect::Warns(&["in.mcap", "ends early", "complete messages were read"]),
+            expect: Expect::LosesInput(&["in.mcap", "ends early", "complete messages were read"]),
         },
         ProcessCase {
             name: "chunk CRC mismatch",
@@ -769,12 +778,31 @@ fn eval_bad_inputs() {
     let bytes = std::fs::read(&full).unwrap();
     let (_, summary_start) = layout(&bytes);
     std::fs::write(&cut, &bytes[..summary_start as usize + 30]).unwrap();
+    // ...and one cut inside its last chunk (small chunks, so the channels come before the cut):
+    // messages lost, exit 3.
+    let chunked = dir.join("chunked.mcap");
+    let out = occmask(&os(&[
+        &"process",
+        &raw,
+        &"-o",
+        &chunked,
+        &"--chunk-size-mib",
+        &"0.05",
+        &"-q",
+    ]));
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let bytes = std::fs::read(&chunked).unwrap();
+    let (chunks, _) = layout(&bytes);
+    assert!(chunks.len() > 2, "{} chunks", chunks.len());
+    let (start, len) = *chunks.last().unwrap();
+    let cut_chunk = dir.join("cut_chunk.mcap");
+    std::fs::write(&cut_chunk, &bytes[..(start + len / 2) as usize]).unwrap();
 
     let keep: Vec<String> = entries(dir);
     let keep: Vec<&str> = keep.iter().map(String::as_str).collect();
     let inputs: Vec<PathBuf> = keep.iter().map(|k| dir.join(k)).collect();
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    let cases: [(&str, &Path, Expect); 6] = [
+    let cases: [(&str, &Path, Expect); 7] = [
         (
             "zero-length",
             &empty,
@@ -810,10 +838,28 @@ fn eval_bad_inputs() {
                 "scored the 8 complete frames",
             ]),
         ),
+        (
+            "output truncated inside a chunk",
+            &cut_chunk,
+            Expect::LosesInput(&[
+                "cut_chunk.mcap",
+                "ends early",
+                "bytes are lost",
+                "complete frames",
+            ]),
+        ),
     ];
     for (name, path, expect) in cases {
         let args = os(&[&"eval", &path]);
         check(name, &args, &inputs, dir, &keep, &expect);
+    }
+    // `occmask eval … | head` with the reader already gone: ended by SIGPIPE like any filter,
+    // no panic message. Also as --json.
+    #[cfg(unix)]
+    for json in [false, true] {
+        let mut args = os(&[&"eval", &full, &full, &full]);
+        args.extend(json.then(|| OsString::from("--json")));
+        assert_ends_quietly_on_a_closed_pipe(&args, &format!("eval, json {json}"));
     }
 }
 
@@ -1047,7 +1093,12 @@ fn assert_interrupted(name: &str, out: &Output, cwd: &Path, keep: &[&str]) {
 #[test]
 fn interrupted_runs_leave_nothing_and_rerun_identically() {
     use std::time::Duration;
-    let desk = common::shared_data("tum_fr2_desk_50");
+    let Some(desk) = common::real_data(
+        "tum_fr2_desk_50",
+        "bad_inputs::interrupted_runs_leave_nothing_and_rerun_identically",
+    ) else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     // Each run happens in its own directory with the same relative output name, so the
     // command lines (recorded in convert's metadata) are identical.

@@ -2,6 +2,8 @@
 //! convert channels plus every channel `occmask process` adds; no temporary file left behind.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::process::Command;
 
@@ -94,4 +96,25 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         .output()
         .unwrap();
     assert_eq!(again.status.code(), Some(1));
+}
+
+/// `occmask demo | head` with the reader already gone: the demo still writes its file, then
+/// ends on SIGPIPE like any filter when it prints, with no panic message.
+#[cfg(unix)]
+#[test]
+fn demo_into_a_closed_pipe_ends_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = dir.path().join("demo.mcap");
+    let args = [
+        "demo".as_ref(),
+        "--width".as_ref(),
+        "160".as_ref(),
+        "--output".as_ref(),
+        output.as_os_str(),
+    ];
+    common::assert_ends_quietly_on_a_closed_pipe(&args, "demo");
+    assert!(
+        output.is_file(),
+        "the demo's file is written before anything is printed"
+    );
 }

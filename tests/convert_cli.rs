@@ -129,6 +129,17 @@ fn usage_errors_exit_2() {
         let out = convert("tum", &c.dir, &c.out, extra);
         assert_eq!(out.status.code(), Some(2), "{extra:?}: {}", stderr(&out));
     }
+    // Numbers out of range name the flag and the range (1e300 ms once saturated silently).
+    for (extra, range) in [
+        (["--max-pair-gap-ms", "1e300"], "from 0 to 60000"),
+        (["--max-pair-gap-ms", "inf"], "from 0 to 60000"),
+        (["--chunk-size-mib", "1e300"], "at most 1024"),
+    ] {
+        let out = convert("tum", &c.dir, &c.out, &extra);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(extra[0]) && err.contains(range), "{extra:?}: {err}");
+    }
     assert_eq!(occmask(&["convert", "tum"]).status.code(), Some(2));
     assert!(!c.out.exists());
 }
@@ -449,7 +460,12 @@ fn larr_variants_underscore_dir_and_no_association() {
 
 #[test]
 fn jpeg_colour_passes_through_unchanged() {
-    let src = shared_data("7scenes_redkitchen_300");
+    let Some(src) = real_data(
+        "7scenes_redkitchen_300",
+        "convert_cli::jpeg_colour_passes_through_unchanged",
+    ) else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     // A 5-frame TUM-layout view of the (non-redistributable) sequence, built in the temp dir.
     let dir = tmp.path().join("kitchen");
@@ -509,7 +525,12 @@ fn icsl_uses_millimetres_and_the_icsl_camera() {
 #[test]
 fn ctrl_c_stops_cleanly_without_leaving_files() {
     use std::time::{Duration, Instant};
-    let src = shared_data("7scenes_redkitchen_300");
+    let Some(src) = real_data(
+        "7scenes_redkitchen_300",
+        "convert_cli::ctrl_c_stops_cleanly_without_leaving_files",
+    ) else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     let out_path = tmp.path().join("out.mcap");
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))

@@ -1,4 +1,4 @@
-//! Round trip: convert ../shared/data/tum_fr2_desk_50 with the binary, read it back with the
+//! Round trip: convert the TUM fr2_desk excerpt in fixtures/ with the binary, read it back with the
 //! library's reader, and compare with the source files decoded independently (the `image`
 //! crate, the text files): every colour byte, depth pixel, timestamp and pose.
 
@@ -34,7 +34,7 @@ fn list(dir: &Path, name: &str) -> Vec<(u64, std::path::PathBuf)> {
 
 #[test]
 fn tum_fr2_desk_round_trips_exactly() {
-    let src = shared_data("tum_fr2_desk_50");
+    let src = tum_fixture();
     let tmp = tempfile::tempdir().unwrap();
     let out_path = tmp.path().join("desk.mcap");
     let out = occmask(&[
@@ -54,7 +54,10 @@ fn tum_fr2_desk_round_trips_exactly() {
         .lines()
         .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
         .collect();
-    assert_eq!((rgb.len(), depth.len(), gt_lines.len()), (50, 50, 792));
+    assert_eq!(
+        (rgb.len(), depth.len(), gt_lines.len()),
+        (TUM_FIXTURE_FRAMES, TUM_FIXTURE_FRAMES, 154)
+    );
 
     let reader = McapFileReader::open(&out_path).unwrap();
     let channels = reader.channels();
@@ -212,9 +215,9 @@ fn tum_fr2_desk_round_trips_exactly() {
     let md = &metadata[0].metadata;
     assert_eq!(metadata[0].name, METADATA_CONVERT);
     assert_eq!(md["dataset_kind"], "tum");
-    assert_eq!(md["sequence_name"], "tum_fr2_desk_50");
+    assert_eq!(md["sequence_name"], "tum_fr2_desk_10");
     assert_eq!(md["intrinsics_source"], "folder name (fr2)");
-    assert_eq!(md["pairs"], "50");
+    assert_eq!(md["pairs"], TUM_FIXTURE_FRAMES.to_string());
     assert!(md["command_line"].contains("convert tum"));
     let attachments = reader.attachments().unwrap();
     let names: Vec<&str> = attachments.iter().map(|a| a.name.as_str()).collect();
@@ -228,5 +231,8 @@ fn tum_fr2_desk_round_trips_exactly() {
         ]
     );
     assert_eq!(attachments[3].data, gt_text.as_bytes());
-    assert_eq!(attachments[0].data.iter().filter(|&&b| b == b'\n').count(), 51);
+    assert_eq!(
+        attachments[0].data.iter().filter(|&&b| b == b'\n').count(),
+        TUM_FIXTURE_FRAMES + 1
+    );
 }

@@ -103,6 +103,7 @@ fn processor_with_external_poses_does_not_allocate_after_the_first_frame() {
                     gray: &f.gray,
                     depth_m: &f.depth_m,
                     world_from_marker: Some(&f.world_from_camera),
+                    ignore_in_previous: None,
                 })
                 .unwrap()
                 .stats

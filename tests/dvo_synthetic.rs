@@ -8,11 +8,11 @@ use occmask::geometry::{se3_exp, Twist};
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use occmask::synthetic::{motion_pair, SequenceConfig};
 
-/// Issue 3's targets: 1 mm and 0.05° per frame pair. With pixel-area-integrated colour
+/// The targets: 1 mm and 0.05° per frame pair. With pixel-area-integrated colour
 /// (`SequenceConfig::colour_samples_per_axis`, jittered 2 × 2) the 144 cases of the multi-seed
 /// test end within 0.82 mm / 0.011° (static) and 0.58 mm / 0.008° (masked). The point-sampled
-/// renderer of session 1 aliased the texture on the grazing floor and ceiling (the scene's
-/// only parallax) and biased translation by up to 2.45 mm; see the README.
+/// renderer it replaced aliased the texture on the grazing floor and ceiling (the scene's
+/// only parallax) and biased translation by up to 2.45 mm; see docs/accuracy.md.
 const MAX_TRANS_ERR_MM: f64 = 1.0;
 const MAX_ROT_ERR_DEG: f64 = 0.05;
 
@@ -41,7 +41,7 @@ const SEEDS: std::ops::RangeInclusive<u64> = 1..=8;
 /// Every seed × every motion × {static scene, 30 % box masked, box not masked}: the static and
 /// masked estimates must converge within the bounds; the unmasked ones are reported (the box
 /// drags them several centimetres) and must never be a `Failed` without reason. This is the
-/// regression test for issue 3's wrong-minimum bug: with the old 4-level pyramid, 3° pitch with
+/// regression test for the wrong-minimum bug of the 4-level pyramid: with it, 3° pitch with
 /// the box masked ended 43–310 mm off for seeds 3, 4, 5 and 8 and still said `Converged`.
 #[test]
 fn every_seed_and_motion_converges_within_the_bounds() {

@@ -1,4 +1,4 @@
-//! Numeric failure modes of the pipeline (issue 6): textureless frames, frames without depth,
+//! Numeric failure modes of the pipeline (docs/method.md, "Closed loop"): textureless frames, frames without depth,
 //! sensor blackouts and a teleport (huge jump) on synthetic sequences. DVO must report failure
 //! (or its implausible estimate be rejected), the pipeline must fall back as documented in
 //! `occmask::pipeline`, mark the frame in its statistics, never produce NaN, and the masks must
@@ -98,6 +98,7 @@ fn run(
                 gray: &frame.gray,
                 depth_m: &frame.depth_m,
                 world_from_marker: None,
+                ignore_in_previous: None,
             })
             .unwrap();
         assert!(

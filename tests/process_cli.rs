@@ -222,17 +222,26 @@ fn per_file_thread_pools_do_not_change_the_output_bytes() {
         outputs[0][1] == outputs[1][1],
         "b differs between the thread splits"
     );
-    for flag in ["--jobs", "--threads-per-file"] {
+    // Out-of-range numbers are usage errors naming the range, never silently clamped or wrapped.
+    for (flag, value, range) in [
+        ("--jobs", "0", "from 1 to 1024"),
+        ("--threads-per-file", "0", "from 1 to 1024"),
+        ("--threads-per-file", "1000000", "from 1 to 1024"),
+        ("--max-pair-gap-ms", "1e300", "from 0 to 60000"),
+        ("--max-pair-gap-ms", "60001", "from 0 to 60000"),
+        ("--chunk-size-mib", "1e300", "at most 1024"),
+    ] {
         let out = occmask(&[
             "process".as_ref(),
             a.as_os_str(),
             "--out-dir".as_ref(),
             dir.path().as_os_str(),
             flag.as_ref(),
-            "0".as_ref(),
+            value.as_ref(),
         ]);
-        assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-        assert!(stderr(&out).contains(">= 1"), "{}", stderr(&out));
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(err.contains(flag) && err.contains(range), "{flag} {value}: {err}");
     }
 }
 

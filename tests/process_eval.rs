@@ -174,6 +174,43 @@ fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
     }
     assert!((oa.ate.unwrap().rmse_m - of.ate.unwrap().rmse_m).abs() < 1e-9);
 
+    // A ground truth that starts after the images anchors at the first frame it covers: the
+    // file is processed, frame 3 is where the estimate meets the ground truth, and the frames
+    // before it are in the same frame.
+    let late_path = dir.path().join("late.in.mcap");
+    let late = FixtureSpec {
+        first_ground_truth_frame: 3,
+        ..FixtureSpec::default()
+    };
+    std::fs::write(&late_path, fixture_bytes(Flavor::Protobuf, &late)).unwrap();
+    let late_out = dir.path().join("late.out.mcap");
+    let file = BufWriter::new(std::fs::File::create(&late_out).unwrap());
+    let (sink, report) = process_file(
+        &McapInput::open(&late_path).unwrap(),
+        file,
+        &ProcessConfig::default(),
+        &mut test_factory,
+        &mut NoHooks,
+    )
+    .unwrap();
+    sink.into_inner().unwrap().sync_all().unwrap();
+    assert_eq!(report.frames, 12);
+    let anchor = report.anchor_frame.expect("anchored");
+    assert_eq!(anchor.index, 3);
+    let (late_truth, late_odometry) = (read(&late_out, GT_TOPIC), read(&late_out, TOPIC_ODOMETRY));
+    assert_eq!(late_odometry.len(), 12);
+    assert_eq!(anchor.timestamp_ns, late_odometry[3].timestamp_ns);
+    let truth_3 = interpolate(&late_truth, late_odometry[3].timestamp_ns, u64::MAX).unwrap();
+    assert!(close(&late_odometry[3].world_from_camera, &truth_3));
+    // One change of frame for all twelve: the same as anchoring the unanchored run at frame 3.
+    let world_from_odometry = truth_3 * f[3].world_from_camera.inverse();
+    for (li, fi) in late_odometry.iter().zip(&f) {
+        assert!(close(
+            &li.world_from_camera,
+            &(world_from_odometry * fi.world_from_camera)
+        ));
+    }
+
     // A named anchor channel that the file lacks is an error naming the flag.
     let input_path = dir.path().join("anchored.in.mcap");
     let input = McapInput::open(&input_path).unwrap();

@@ -616,13 +616,13 @@ mod geometry {
     struct Capture(Seen);
 
     impl FrameProcessor for Capture {
-        fn process(&mut self, frame: &RgbdFrame<'_>) -> occmask::Result<ProcessedFrame> {
+        fn push(&mut self, frame: &RgbdFrame<'_>) -> occmask::Result<Vec<ProcessedFrame>> {
             self.0
                 .lock()
                 .unwrap()
                 .push((frame.gray.clone(), frame.depth_m.clone()));
             let size = frame.gray.size();
-            Ok(ProcessedFrame {
+            Ok(vec![ProcessedFrame {
                 mask: Mask::from_fn(size, |x, _| if x >= size.width * 3 / 4 { MASK_SET } else { 0 }),
                 world_from_camera: nalgebra::Isometry3::identity(),
                 accumulation: None,
@@ -630,7 +630,7 @@ mod geometry {
                 dvo_iterations: 0,
                 dvo_cost: 0.0,
                 health: Default::default(),
-            })
+            }])
         }
     }
 
@@ -639,7 +639,7 @@ mod geometry {
         let seen: Seen = Arc::default();
         let capture = Arc::clone(&seen);
         let mut factory =
-            move |_, _, _| Ok(Box::new(Capture(Arc::clone(&capture))) as Box<dyn FrameProcessor>);
+            move |_, _, _, _: &_| Ok(Box::new(Capture(Arc::clone(&capture))) as Box<dyn FrameProcessor>);
         let (out, report) = process_file(
             &input,
             std::io::Cursor::new(Vec::new()),

@@ -98,7 +98,7 @@ fn converted_files_pass_doctor_and_the_python_reader() {
     let tmp = tempfile::tempdir().unwrap();
 
     let desk = tmp.path().join("desk.mcap");
-    let src = shared_data("tum_fr2_desk_50");
+    let src = tum_fixture();
     convert(&[
         "convert".as_ref(),
         "tum".as_ref(),
@@ -112,12 +112,12 @@ fn converted_files_pass_doctor_and_the_python_reader() {
         &desk,
         "validate_mcap.py",
         &[
-            "/camera/rgb/image=50",
-            "/camera/rgb/camera_info=50",
-            "/camera/depth/image=50",
-            "/camera/depth/camera_info=50",
-            "/groundtruth/pose=792",
-            "/tf=792",
+            "/camera/rgb/image=10",
+            "/camera/rgb/camera_info=10",
+            "/camera/depth/image=10",
+            "/camera/depth/camera_info=10",
+            "/groundtruth/pose=154",
+            "/tf=154",
         ],
     );
 

@@ -9,7 +9,7 @@
 # the baseline's default when BASELINE is set, DVO again. Each is one criterion `--quick` run.
 # The summary gives medians and how many default runs met the 3 ms target. On a shared machine
 # whose speed swings, compare builds only within the same rounds, and read the detector beside
-# DVO (4.64 ms per pair on this machine at its usual speed, session 4).
+# DVO.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROUNDS=${1:-10}

@@ -3,15 +3,17 @@
 # 640x480, annotated copy:
 #
 #  scaling  total frames/s for 1, 2 and 4 input files with --jobs 1, 2 and 4 and with one or all
-#           compute threads per file, on a file of the tum_fr2_desk_50 frames replayed forwards
+#           compute threads per file, on a file of the TUM folder's frames replayed forwards
 #           and backwards (SCALING_MB of messages, default 240 = ~210 frames, generated here);
 #           prints one table: best wall of REPEATS runs (default 3), total frames/s, speed-up
 #           over one file, CPU (user+sys) per frame, peak RSS.
 #  memory   peak RSS on a generated file of at least MIN_BYTES (default 2 GiB), annotated copy and
-#           --sidecar, plus the 50-frame desk file and its eval.
+#           --sidecar, plus the TUM folder's file and its eval.
 #
 # Usage: bash tools/bench_process.sh [scaling|memory|all] [MIN_BYTES]   (default: all)
 #        REPEATS=5 SCALING_MB=480 bash tools/bench_process.sh scaling
+#        TUM=DIR: the TUM-layout folder (default the excerpt fixtures/tum_fr2_desk_10;
+#        TUM=$OCCMASK_DATA/tum_fr2_desk_50 for the 50-frame window)
 # Files go to bench-out/process; the big ones are deleted at the end unless KEEP=1. Run it on an
 # idle machine: `uptime` is printed before and after, since other work on the cores shows up as
 # lower frames/s and higher CPU per frame.
@@ -25,6 +27,7 @@ fi
 MIN_BYTES=${1:-$((2 * 1024 * 1024 * 1024))}
 REPEATS=${REPEATS:-3}
 SCALING_MB=${SCALING_MB:-240}
+TUM=${TUM:-fixtures/tum_fr2_desk_10}
 OUT=bench-out/process
 mkdir -p "$OUT"
 cargo build --release --quiet --bin occmask --example make_big_rgbd_mcap
@@ -33,7 +36,7 @@ GEN=target/release/examples/make_big_rgbd_mcap
 TIME=/usr/bin/time
 CORES=$(nproc)
 
-$BIN convert tum ../shared/data/tum_fr2_desk_50 -o "$OUT/desk.mcap" --force -q
+$BIN convert tum "$TUM" -o "$OUT/desk.mcap" --force -q
 
 # One timed run: best-of-REPEATS wall and that run's CPU and RSS into the globals
 # WALL CPU RSS_MB FRAMES. Arguments: the process arguments after the inputs.
@@ -106,9 +109,9 @@ EOF
 
 memory() {
   cp "$OUT/desk.mcap" "$OUT/desk2.mcap"
-  echo "== one file, 50 frames (dvo closed loop)"
+  echo "== one file, $TUM (dvo closed loop)"
   $TIME -f "wall %e s, peak RSS %M KB" $BIN process "$OUT/desk.mcap" -o "$OUT/desk.out.mcap" --force
-  echo "== two files in parallel, 2 x 50 frames"
+  echo "== two files in parallel, 2 x $TUM"
   mkdir -p "$OUT/par"
   $TIME -f "wall %e s, peak RSS %M KB" $BIN process "$OUT/desk.mcap" "$OUT/desk2.mcap" --out-dir "$OUT/par" --force
   echo "== eval of the single-file output"

@@ -12,7 +12,7 @@
 # layout's 0-30000 range (not the colour map), the mask; the 3D panel and the plot run unchanged.
 #
 # Usage: bash tools/foxglove_screenshots.sh [OUT_DIR]   (default foxglove/screenshots)
-# Needs: apt-get install -y chromium pngquant; ../shared/data/tum_fr2_desk_50.
+# Needs: apt-get install -y chromium pngquant. Real data: the TUM excerpt in fixtures/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out_dir="${1:-foxglove/screenshots}"
@@ -27,7 +27,7 @@ bin=target/release/occmask
 
 # The demo (moving object, ground truth) and real data (TUM fr2 desk through convert + process).
 (cd "$work" && "$OLDPWD/$bin" demo --quiet --output demo.mcap)
-"$bin" convert tum ../shared/data/tum_fr2_desk_50 -o "$work/desk.mcap" --quiet
+"$bin" convert tum fixtures/tum_fr2_desk_10 -o "$work/desk.mcap" --quiet
 "$bin" process "$work/desk.mcap" -o "$work/desk.out.mcap" --quiet
 
 # Both files pass the Foxglove check first (what the screenshots show is what it checks).
@@ -39,7 +39,7 @@ shoot() { # FILE NAME TIMES
     --out "$work/$2" --times "$3" --compat --width 1280 --height 800 --wait-ms 30000
 }
 shoot "$work/demo.mcap" demo 0.3,4.5
-shoot "$work/desk.out.mcap" tum-desk 1.6
+shoot "$work/desk.out.mcap" tum-desk 0.25
 
 mkdir -p "$out_dir"
 for png in "$work"/*.png; do

@@ -7,17 +7,18 @@ Reads the per-pair CSV written by `cargo run --release --example dvo_tum -- DIR 
 intrinsics, and prints a markdown table: RPE RMSE (translation mm, rotation deg) and mean
 milliseconds per pair for both.
 
-Setup (outside the repository):
-    python3 -m venv /work/venv-o3d && /work/venv-o3d/bin/pip install open3d numpy
-Run:
-    cargo run --release --example dvo_tum -- ../shared/data/tum_fr2_desk_50 --csv /tmp/ours.csv
-    /work/venv-o3d/bin/python tools/open3d_compare.py ../shared/data/tum_fr2_desk_50 /tmp/ours.csv \
+Setup (a virtual environment of your choice; `apt-get install libusb-1.0-0` if `import open3d`
+complains):
+    python3 -m venv /tmp/venv-o3d && /tmp/venv-o3d/bin/pip install open3d numpy
+Run (DIR: a TUM folder, e.g. fixtures/tum_fr2_desk_10 or $OCCMASK_DATA/tum_fr2_desk_50):
+    cargo run --release --example dvo_tum -- DIR --csv /tmp/ours.csv
+    /tmp/venv-o3d/bin/python tools/open3d_compare.py DIR /tmp/ours.csv \
         --ours-cpu-ms <CPU ms/pair printed by dvo_tum>
 
 CPU ms counts all threads of the process (robust when other jobs load the machine).
 Open3D's timing covers `compute_rgbd_odometry` only (RGBDImage objects are built beforehand);
-ours covers pyramid construction + estimation. Error convention (TUM evaluate_rpe, algorithm.md
-section 7.2): E = a^-1 b, a = estimated current_from_reference, b = ground truth.
+ours covers pyramid construction + estimation. Error convention (TUM evaluate_rpe, docs/method.md
+"Evaluation"): E = a^-1 b, a = estimated current_from_reference, b = ground truth.
 """
 import argparse
 import csv
@@ -28,7 +29,7 @@ import time
 import numpy as np
 import open3d as o3d
 
-FX, FY, CX, CY = 520.9, 521.0, 325.1, 249.7  # TUM fr2 (algorithm.md section 2.1)
+FX, FY, CX, CY = 520.9, 521.0, 325.1, 249.7  # TUM fr2
 DEPTH_SCALE = 5000.0
 
 

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Soak benchmark of `occmask process` (issue 6): a 30-minute recording at 30 Hz (54 000 VGA
+# Soak benchmark of `occmask process`: a 30-minute recording at 30 Hz (54 000 VGA
 # frames) through the default pipeline (DVO closed loop + detector), checking that memory does
 # not grow with the length of the run and measuring frames per second.
 #
-# The recording is generated (examples/make_soak_mcap.rs): the 50 frames of
-# ../shared/data/tum_fr2_desk_50 replayed forwards and backwards with fresh 30 Hz stamps, colour
+# The recording is generated (examples/make_soak_mcap.rs): the frames of a TUM folder (TUM, default
+# the excerpt fixtures/tum_fr2_desk_10) replayed forwards and backwards with fresh 30 Hz stamps, colour
 # re-encoded as JPEG and depth as compressedDepth PNG (≈ 0.25 MB per frame: 13 GB for 54 000
 # frames; check `df -h` first). The output is a sidecar (`--sidecar`: only the new channels), so
 # the disk holds one copy of the recording; the annotated copy's memory is bounded the same way
@@ -14,11 +14,12 @@
 # $OUT/soak.rss.tsv; the summary prints the peak RSS after ~1 minute and at the end, and
 # `/usr/bin/time -v` gives the overall peak and CPU time.
 #
-# Usage: [FRAMES=54000] [INTERVAL=5] [NICE=19] [KEEP=0] bash tools/soak.sh
+# Usage: [FRAMES=54000] [INTERVAL=5] [NICE=19] [KEEP=0] [TUM=DIR] bash tools/soak.sh
 #   FRAMES=3000 bash tools/soak.sh   # a 100-second recording, a few minutes
 set -euo pipefail
 cd "$(dirname "$0")/.."
 FRAMES=${FRAMES:-54000}
+TUM=${TUM:-fixtures/tum_fr2_desk_10}
 INTERVAL=${INTERVAL:-5}
 NICE=${NICE:-19}
 OUT=bench-out/soak
@@ -32,7 +33,7 @@ trap cleanup EXIT
 cargo build --release --quiet --bin occmask --example make_soak_mcap
 BIN=target/release/occmask
 
-$BIN convert tum ../shared/data/tum_fr2_desk_50 -o "$OUT/desk.mcap" --force -q
+$BIN convert tum "$TUM" -o "$OUT/desk.mcap" --force -q
 echo "== generating $FRAMES frames"
 target/release/examples/make_soak_mcap "$OUT/desk.mcap" "$OUT/soak.mcap" "$FRAMES"
 ls -l "$OUT/soak.mcap"

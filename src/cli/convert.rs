@@ -16,19 +16,19 @@ use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
 use occmask::mcap_io::AtomicOutput;
 use occmask::time::format_ns_as_seconds;
 
-use super::options::{parse_camera_arg, parse_non_negative, parse_positive, WriteArgs};
+use super::options::{parse_camera_arg, parse_pair_gap_ms, parse_positive, WriteArgs};
 use super::{command_line, Globals, Outcome};
 
 const CONVERT_EXAMPLES: &str = "\
 Examples:
-  occmask convert tum ../shared/data/tum_fr2_desk_50 -o desk.mcap
+  occmask convert tum fixtures/tum_fr2_desk_10 -o desk.mcap
   occmask convert tum rgbd_dataset_freiburg3_walking_xyz -o walking.mcap --compression lz4
   occmask convert icsl icsl_seq1 -o icsl.mcap
   occmask convert larr dynamic_board -o board.mcap --force";
 
 const TUM_EXAMPLES: &str = "\
 Examples:
-  occmask convert tum ../shared/data/tum_fr2_desk_50 -o desk.mcap
+  occmask convert tum fixtures/tum_fr2_desk_10 -o desk.mcap
   occmask convert tum my_kinect_seq -o seq.mcap --camera 525,525,319.5,239.5
   occmask convert tum 7scenes_seq -o s.mcap --camera kinect-default --max-pair-gap-ms 5
 
@@ -119,7 +119,7 @@ pub struct CommonArgs {
     pub force: bool,
 
     /// Largest colour/depth time gap of a pair, milliseconds.
-    #[arg(long, value_parser = parse_non_negative, default_value_t = DEFAULT_MAX_PAIR_GAP_NS as f64 / 1e6)]
+    #[arg(long, value_parser = parse_pair_gap_ms, default_value_t = DEFAULT_MAX_PAIR_GAP_NS as f64 / 1e6)]
     pub max_pair_gap_ms: f64,
 
     /// Also write colour and depth frames that have no partner (skipped and reported by default).

@@ -36,9 +36,14 @@ pub struct EvalArgs {
 /// # Errors
 /// The first file that cannot be read or has no occmask channels.
 pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
+    let mut outcome = Outcome::Success;
     for path in &args.inputs {
         let report = evaluate(path).with_context(|| format!("evaluating {}", path.display()))?;
         if let Some(t) = &report.truncation {
+            if !t.messages_intact {
+                // Scored, but on fewer frames than the file was written with: exit code 3.
+                outcome = Outcome::DataLoss;
+            }
             if !globals.quiet {
                 eprintln!(
                     "warning: {} ends early: {}; scored the {} complete frames before the cut",
@@ -58,5 +63,5 @@ pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
             print!("{}", format_report(&report));
         }
     }
-    Ok(Outcome::Success)
+    Ok(outcome)
 }

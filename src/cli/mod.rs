@@ -52,8 +52,8 @@ pub struct Globals {
 pub enum Outcome {
     /// Everything asked for was done (exit code 0).
     Success,
-    /// The output was written, but some input could not be used (exit code 3).
-    #[allow(dead_code)] // used by later subcommands
+    /// The output was written, but some input could not be used (exit code 3): `process` or
+    /// `eval` read a truncated file whose last messages were lost.
     DataLoss,
 }
 

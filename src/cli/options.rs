@@ -32,8 +32,8 @@ pub struct WriteArgs {
     #[arg(long, default_value_t = DEFAULT_COMPRESSION_LEVEL)]
     pub compression_level: u32,
 
-    /// Uncompressed chunk size, MiB.
-    #[arg(long, value_parser = parse_positive, default_value_t = (DEFAULT_CHUNK_SIZE_BYTES >> 20) as f64)]
+    /// Uncompressed chunk size, MiB (at most 1024: a chunk is held in memory while written).
+    #[arg(long, value_parser = parse_chunk_size_mib, default_value_t = (DEFAULT_CHUNK_SIZE_BYTES >> 20) as f64)]
     pub chunk_size_mib: f64,
 
     /// zstd worker threads (0 = compress on the writing thread).
@@ -108,11 +108,43 @@ pub fn parse_non_negative(text: &str) -> Result<f64, String> {
     }
 }
 
-/// A whole number >= 1 (counts of files or threads).
+/// Largest `--max-pair-gap-ms`: frames a minute apart are no colour/depth pair, and the value
+/// must stay far from overflowing the nanosecond stamps it is added to.
+pub const MAX_PAIR_GAP_MS: f64 = 60_000.0;
+
+/// `--max-pair-gap-ms`: milliseconds from 0 to [`MAX_PAIR_GAP_MS`].
+pub fn parse_pair_gap_ms(text: &str) -> Result<f64, String> {
+    parse_non_negative(text)
+        .ok()
+        .filter(|&v| v <= MAX_PAIR_GAP_MS)
+        .ok_or_else(|| {
+            format!("expected milliseconds from 0 to {MAX_PAIR_GAP_MS} (one minute), found {text:?}")
+        })
+}
+
+/// Largest `--chunk-size-mib`.
+pub const MAX_CHUNK_SIZE_MIB: f64 = 1024.0;
+
+/// `--chunk-size-mib`: a number > 0 and at most [`MAX_CHUNK_SIZE_MIB`].
+pub fn parse_chunk_size_mib(text: &str) -> Result<f64, String> {
+    parse_positive(text)
+        .ok()
+        .filter(|&v| v <= MAX_CHUNK_SIZE_MIB)
+        .ok_or_else(|| {
+            format!("expected a size in MiB above 0 and at most {MAX_CHUNK_SIZE_MIB}, found {text:?}")
+        })
+}
+
+/// Largest count of files in flight or of threads per file.
+pub const MAX_COUNT: usize = 1024;
+
+/// A whole number from 1 to [`MAX_COUNT`] (counts of files or threads).
 pub fn parse_at_least_one(text: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
-        Ok(v) if v >= 1 => Ok(v),
-        _ => Err(format!("expected a whole number >= 1, found {text:?}")),
+        Ok(v) if (1..=MAX_COUNT).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "expected a whole number from 1 to {MAX_COUNT}, found {text:?}"
+        )),
     }
 }
 
@@ -164,7 +196,12 @@ mod tests {
         assert!(parse_camera_arg("fr2").is_ok() && parse_camera_arg("banana").is_err());
         assert_eq!(parse_at_least_one("3"), Ok(3));
         assert!(parse_at_least_one("0").is_err() && parse_at_least_one("-1").is_err());
-        assert!(parse_at_least_one("1.5").is_err());
+        assert!(parse_at_least_one("1.5").is_err() && parse_at_least_one("1025").is_err());
+        assert_eq!(parse_pair_gap_ms("60000"), Ok(60_000.0));
+        assert!(parse_pair_gap_ms("1e300").is_err() && parse_pair_gap_ms("60000.5").is_err());
+        assert!(parse_pair_gap_ms("-1").is_err() && parse_pair_gap_ms("nan").is_err());
+        assert_eq!(parse_chunk_size_mib("1024"), Ok(1024.0));
+        assert!(parse_chunk_size_mib("1e300").is_err() && parse_chunk_size_mib("0").is_err());
         let pose = parse_pose("0.015, 0, 0, 0, 0, 0.7071068, 0.7071068").unwrap();
         assert!((pose.translation.vector.x - 0.015).abs() < 1e-12);
         assert!((pose.rotation.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);

@@ -16,6 +16,8 @@ use occmask::mcap_io::annotate::AnnotateOptions;
 use occmask::mcap_io::input::detect::TopicOverrides;
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::AtomicOutput;
+use occmask::occlusion::AppearanceGrowthConfig;
+use occmask::pipeline::{ProcessingMode, ProcessorConfig};
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::rectify::GeometryOptions;
 use occmask::process::{
@@ -26,7 +28,7 @@ use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
 
 use super::options::{
-    parse_at_least_one, parse_camera_arg, parse_non_negative, parse_pose, parse_positive, WriteArgs,
+    parse_at_least_one, parse_camera_arg, parse_pair_gap_ms, parse_pose, parse_positive, WriteArgs,
 };
 use super::{Globals, Outcome};
 
@@ -57,11 +59,16 @@ pub enum PoseArg {
 #[command(after_help = AFTER_HELP)]
 pub struct ProcessArgs {
     /// Input MCAP files (never modified).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "print_config")]
     pub inputs: Vec<PathBuf>,
 
     /// Output file (one input only).
-    #[arg(short, long, conflicts_with = "out_dir", required_unless_present = "out_dir")]
+    #[arg(
+        short,
+        long,
+        conflicts_with = "out_dir",
+        required_unless_present_any = ["out_dir", "print_config"]
+    )]
     pub output: Option<PathBuf>,
 
     /// Output folder: each input X.mcap becomes DIR/X.occmask.mcap.
@@ -91,9 +98,32 @@ pub struct ProcessArgs {
     #[arg(long)]
     pub no_anchor: bool,
 
-    /// The paper's detector: no appearance-gated object completion (which completes objects
-    /// that start moving, at ~1.5 ms per 640×480 frame with a large object in view).
+    /// Causal processing: one forward pass, each frame's result from it and the frames before
+    /// (what an online system gets). The default offline mode adds a backward pass and a
+    /// refinement pass over a look-ahead of 90 frames, and finds moving objects earlier and
+    /// more completely.
     #[arg(long)]
+    pub causal: bool,
+
+    /// DVO, detector and failure-policy parameters from a JSON file: any subset of the fields
+    /// `--print-config` prints (the others keep their defaults). Flags such as
+    /// --appearance-growth and --causal apply on top. Recorded in the output's occmask.process metadata.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+
+    /// Print every DVO, detector and failure-policy parameter with its default value, as the
+    /// JSON that --config reads, and exit.
+    #[arg(long, exclusive = true)]
+    pub print_config: bool,
+
+    /// Appearance-gated object completion: objects also grow into neighbouring pixels of
+    /// continuous depth whose intensity changed (completes textured objects that start moving;
+    /// on people standing on a floor it leaks onto the floor, so it is off by default).
+    #[arg(long)]
+    pub appearance_growth: bool,
+
+    /// The default (kept for scripts written when completion was on by default).
+    #[arg(long, hide = true, conflicts_with = "appearance_growth")]
     pub no_appearance_growth: bool,
 
     /// Colour image topic (default: detected by schema).
@@ -151,7 +181,7 @@ pub struct ProcessArgs {
     pub end: Option<u64>,
 
     /// Largest colour/depth stamp difference of a pair, milliseconds.
-    #[arg(long, value_parser = parse_non_negative, default_value_t = DEFAULT_PAIR_TOLERANCE_NS as f64 / 1e6)]
+    #[arg(long, value_parser = parse_pair_gap_ms, default_value_t = DEFAULT_PAIR_TOLERANCE_NS as f64 / 1e6)]
     pub max_pair_gap_ms: f64,
 
     /// Write only the new channels (open it together with the input in Foxglove).
@@ -281,6 +311,35 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
             bail!("--end must be after --start");
         }
     }
+    let mut processor = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read --config {}", path.display()))?;
+            serde_json::from_str::<ProcessorConfig>(&text).with_context(|| {
+                format!(
+                    "--config {}: not a valid configuration (`occmask process --print-config` \
+                     prints every field with its default)",
+                    path.display()
+                )
+            })?
+        }
+        None => ProcessorConfig::default(),
+    };
+    if args.appearance_growth {
+        processor
+            .occlusion
+            .appearance_growth
+            .get_or_insert_with(AppearanceGrowthConfig::default);
+    } else if args.no_appearance_growth {
+        processor.occlusion.appearance_growth = None;
+    }
+    if args.causal {
+        processor.mode = ProcessingMode::Causal;
+    }
+    processor.validate().with_context(|| match &args.config {
+        Some(path) => format!("--config {}", path.display()),
+        None => "the detector and DVO parameters".to_owned(),
+    })?;
     Ok(ProcessConfig {
         topics: TopicOverrides {
             rgb: args.rgb_topic.clone(),
@@ -315,6 +374,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
             write: args.write.options(),
             ..Default::default()
         },
+        processor,
     })
 }
 
@@ -436,7 +496,6 @@ fn run_one(
     }
     let mut factory = occmask::process::pipeline_factory(PipelineOptions {
         keep_accumulation: args.accumulation,
-        appearance_growth: !args.no_appearance_growth,
         camera_from_marker: args.camera_from_marker,
     });
     let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
@@ -481,6 +540,11 @@ fn style(template: &str) -> ProgressStyle {
 /// Usage errors before anything runs; "N of M files failed" after the summary when any
 /// file failed (the others are still written).
 pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
+    if args.print_config {
+        let text = serde_json::to_string_pretty(&ProcessorConfig::default())?;
+        println!("{text}");
+        return Ok(Outcome::Success);
+    }
     let jobs = plan(&args)?;
     let config = config(&args)?;
     let all_inputs: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();
@@ -512,9 +576,9 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         }
     }
 
-    // Each file in flight runs its pipeline on a rayon pool of its own share of the cores
-    // (issue 5: "rayon across files, each file sequential inside" once there are as many files
-    // as cores); the output bytes do not depend on the split.
+    // Each file in flight runs its pipeline on a rayon pool of its own share of the cores (so
+    // with as many files as cores each file runs sequentially inside); the output bytes do not
+    // depend on the split.
     let budget = ThreadBudget::new(available_cores(), jobs.len(), args.jobs, args.threads_per_file)
         .context("--jobs/--threads-per-file")?;
     let results = run_batch(jobs.len(), &budget, |i| {
@@ -568,9 +632,23 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     if failed > 0 {
         bail!("{failed} of {} files failed", results.len());
     }
+    // A truncated input whose messages (not only its index) were cut off: every file was
+    // written from what could be read, and exit code 3 says that input was lost.
+    if results
+        .iter()
+        .any(|r| matches!(&r.outcome, Ok((rep, _)) if lost_input(rep)))
+    {
+        return Ok(Outcome::DataLoss);
+    }
     // Unpaired frames and frames outside the pose stream are reported in the summary, not an
     // error: colour and depth often run at different rates, and every input message is copied.
     Ok(Outcome::Success)
+}
+
+/// True when the input was truncated inside its messages (a cut after the data section loses
+/// only the index, which the reader rebuilds).
+fn lost_input(rep: &ProcessReport) -> bool {
+    rep.input_truncated && !rep.input_truncation.is_some_and(|t| t.messages_intact)
 }
 
 /// One line per problem of a file that was still processed: a truncated input (what was
@@ -610,6 +688,16 @@ fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
              `mcap recover` can rebuild the input's index",
             input.display(),
             rep.frames
+        ));
+    }
+    if let Some(anchor) = rep.anchor_frame.filter(|a| a.index > 0) {
+        out.push(format!(
+            "{}: the odometry is anchored at frame {} (t = {} s), the first the ground truth \
+             covers; the {} frames before it are in the same frame",
+            input.display(),
+            anchor.index,
+            format_ns_as_seconds(anchor.timestamp_ns, 6),
+            anchor.index
         ));
     }
     if let Some(why) = &rep.anchor_skipped {

@@ -1,4 +1,4 @@
-//! LARR RGB-D layout (Kim et al.; algorithm.md §6.1): `rgb/<time>.png`,
+//! LARR RGB-D layout (Kim et al.; docs/method.md "Datasets"): `rgb/<time>.png`,
 //! `depth/<time>.png` (millimetres), `groundtruth mask/<time>.png` (white = moving object),
 //! optional `association.txt` and `groundtruth.txt` (VICON, TUM pose format).
 //!

@@ -10,6 +10,7 @@
 //! file and line, not sorted: they mean a concatenated or corrupted list, and sorting would
 //! silently mix two recordings.
 
+pub mod bonn;
 pub mod larr;
 pub mod tum;
 
@@ -21,7 +22,9 @@ use prost::bytes::Bytes;
 use crate::error::{Error, Result};
 use crate::geometry::camera::{presets, PinholeIntrinsics};
 use crate::geometry::distortion::LensDistortion;
-use crate::image_buf::{ImageSize, Mask, MASK_SET};
+use crate::image_buf::{
+    depth_m_from_u16_into, gray_from_rgb8, DepthMeters, GrayF32, ImageSize, Mask, Rgb8, MASK_SET,
+};
 use crate::mcap_io::ColorFormat;
 use crate::time::format_ns_as_seconds;
 use crate::trajectory::{parse_tum_line, StampedPose};
@@ -573,6 +576,57 @@ pub fn read_depth(path: &Path) -> Result<DepthImage> {
             ),
         )),
     }
+}
+
+/// A colour/depth pair of a dataset decoded for the pipeline.
+#[derive(Debug, Clone)]
+pub struct DecodedPair {
+    /// The colour image's time (the frame's time).
+    pub timestamp_ns: u64,
+    /// The depth image's time.
+    pub depth_timestamp_ns: u64,
+    /// Gray in [0, 1] (BT.601 luma of the colour image).
+    pub gray: GrayF32,
+    /// Depth in metres, 0 = no measurement.
+    pub depth_m: DepthMeters,
+}
+
+/// Decodes pair `pair` of `sequence` (colour PNG/JPEG to gray, 16-bit depth PNG to metres
+/// with `depth_units_per_meter`).
+///
+/// # Errors
+/// [`Error::Io`] / [`Error::BadImage`] for unreadable images, [`Error::SizeMismatch`] when
+/// colour and depth differ in size.
+pub fn decode_pair(sequence: &Sequence, pair: &FramePair, depth_units_per_meter: f64) -> Result<DecodedPair> {
+    let color = &sequence.color[pair.color];
+    let depth = &sequence.depth[pair.depth];
+    let bytes =
+        std::fs::read(&color.path).map_err(|e| Error::io("cannot read colour image", &color.path, e))?;
+    let rgb = image::load_from_memory(&bytes)
+        .map_err(|e| bad_image(&color.path, format!("cannot decode colour image: {e}")))?
+        .to_rgb8();
+    let size = ImageSize::new(rgb.width() as usize, rgb.height() as usize);
+    let rgb = Rgb8::from_vec(size, rgb.pixels().map(|p| p.0).collect())?;
+    let raw = read_depth(&depth.path)?;
+    if raw.size != size {
+        return Err(Error::SizeMismatch {
+            what: format!(
+                "depth {} vs colour {}",
+                depth.path.display(),
+                color.path.display()
+            ),
+            expected: size,
+            found: raw.size,
+        });
+    }
+    let mut depth_m = DepthMeters::filled(size, 0.0);
+    depth_m_from_u16_into(&raw.data, depth_units_per_meter as f32, &mut depth_m)?;
+    Ok(DecodedPair {
+        timestamp_ns: color.timestamp_ns,
+        depth_timestamp_ns: depth.timestamp_ns,
+        gray: gray_from_rgb8(&rgb),
+        depth_m,
+    })
 }
 
 /// Grey level at or above which a mask pixel counts as set ("white = moving object").

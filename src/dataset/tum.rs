@@ -1,5 +1,5 @@
 //! TUM RGB-D layout (also used by ICSL sequences): `rgb.txt`, `depth.txt`, optional
-//! `groundtruth.txt`, images under `rgb/` and `depth/` (algorithm.md §6.3).
+//! `groundtruth.txt`, images under `rgb/` and `depth/` (docs/method.md "Datasets").
 
 use std::path::Path;
 

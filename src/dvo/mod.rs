@@ -1,6 +1,6 @@
 //! Robust dense visual odometry (DVO) between consecutive RGB-D frames that ignores masked
 //! (moving) pixels of the reference frame: the "Robust DVO" of Kim, Kim & Kim (ICRA 2020)
-//! built as algorithm.md §4.5 recommends.
+//! without the authors' release's bugs (docs/method.md, "Dense visual odometry").
 //!
 //! - Cost: Σ ρ_{k_I}(r_I) + γ·Σ ρ_{k_Z}(r_Z) over reference pixels with valid depth that are not
 //!   ignored; r_I photometric, r_Z = Z_cur(w) − z′ against the transformed depth; ρ bi-square
@@ -11,8 +11,9 @@
 //!   `current_from_reference`, mapping reference-camera points into the current camera;
 //!   chain it into poses with [`crate::trajectory::chain`].
 //!
-//! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and
-//! allocates nothing per frame), or [`DvoEstimator`] on two explicitly built pyramids.
+//! Use [`DvoTracker`] per sequence (it keeps the previous frame as the reference and allocates
+//! its pyramids and scratch once; `track` still allocates now and then, as
+//! `tests/detector_alloc.rs` notes), or [`DvoEstimator`] on two explicitly built pyramids.
 //!
 //! # Example
 //! ```
@@ -33,12 +34,14 @@
 //! # Ok::<(), occmask::Error>(())
 //! ```
 
+pub mod completion;
 pub mod mask;
 pub mod residuals;
 pub mod solver;
 pub mod weights;
 
 use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::geometry::se3::is_finite_pose;
@@ -52,7 +55,7 @@ use solver::{LevelError, LevelStop, LmSchedule};
 /// [`DvoEstimate`]; 640×480 has 7 levels of at least 8×8 pixels).
 pub const MAX_DVO_LEVELS: usize = 8;
 
-/// Default initial LM damping λ₀ (relative to diag H). The release uses 0.1 (algorithm.md §2),
+/// Default initial LM damping λ₀ (relative to diag H). The release uses 0.1 (docs/method.md),
 /// but Marquardt damping λ·diag H shrinks the step along H's weakest eigen-direction by
 /// ≈ μ_min / (λ·d): on a distant, nearly fronto-parallel scene the x-translation / yaw valley
 /// has μ_min / d ≈ 1e-4, so with λ₀ = 0.1 (divided by only 1.5 per accepted step) the solver
@@ -92,8 +95,15 @@ pub const MAX_FINAL_COST_FRACTION: f64 = 0.5;
 /// pixels; set 0 to use every pixel with depth.
 pub const MIN_GRADIENT_PER_PX: f32 = 4.0 / 255.0;
 
+/// [`DvoConfig::closed_loop`]'s depth weight γ (the paper's is 0.001).
+pub const CLOSED_LOOP_DEPTH_WEIGHT: f32 = 30.0;
+/// [`DvoConfig::closed_loop`]'s bi-square threshold of the depth residual: 5 cm (the paper's is
+/// 0.5 m), so a point whose depth moved with a person stops pulling.
+pub const CLOSED_LOOP_K_DEPTH_M: f32 = 0.05;
+
 /// The bi-square threshold k_I of the photometric residual (gray in [0, 1]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum IntensityThreshold {
     /// The same k_I on every level (paper: 48/255).
     Constant(f32),
@@ -115,16 +125,66 @@ impl IntensityThreshold {
     }
 }
 
+/// The constant-velocity motion prior of [`DvoConfig::motion_prior`]: ½ Σᵢ (eᵢ/σᵢ)² × `weight` ×
+/// N × ρ_sat added to the cost, with e the twist from the predicted motion to the estimate, N
+/// the level's reference points and ρ_sat the saturated loss of one point. So a deviation of
+/// one sigma in one twist component costs as much as `weight` × N points turning into
+/// outliers, whatever the number of points and the robust thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MotionPriorConfig {
+    /// Sigma of the change of the per-frame translation, metres.
+    pub translation_sigma_m: f64,
+    /// Sigma of the change of the per-frame rotation, radians.
+    pub rotation_sigma_rad: f64,
+    /// Relative weight (see the type's docs).
+    pub weight: f64,
+    /// The prior acts in proportion to the fraction of usable reference pixels the ignore mask
+    /// removed, reaching full `weight` at this fraction: with nothing masked (a static scene)
+    /// the images alone decide; the more of the view moving objects take, the less the rest
+    /// can be trusted to be free of their unmasked parts. 0 = full weight always.
+    pub full_weight_ignored_fraction: f64,
+}
+
+impl Default for MotionPriorConfig {
+    fn default() -> Self {
+        Self {
+            translation_sigma_m: DEFAULT_PRIOR_TRANSLATION_SIGMA_M,
+            rotation_sigma_rad: DEFAULT_PRIOR_ROTATION_SIGMA_RAD,
+            weight: DEFAULT_PRIOR_WEIGHT,
+            full_weight_ignored_fraction: DEFAULT_PRIOR_FULL_WEIGHT_IGNORED_FRACTION,
+        }
+    }
+}
+
+/// Default [`MotionPriorConfig::full_weight_ignored_fraction`].
+pub const DEFAULT_PRIOR_FULL_WEIGHT_IGNORED_FRACTION: f64 = 0.25;
+
+/// Default [`MotionPriorConfig::translation_sigma_m`]: 5 mm of change per frame, 0.15 m/s at
+/// 30 Hz, several times a hand-held camera's frame-to-frame change (TUM fr2_desk: 1.1 mm mean,
+/// 2.8 mm largest).
+pub const DEFAULT_PRIOR_TRANSLATION_SIGMA_M: f64 = 0.005;
+/// Default [`MotionPriorConfig::rotation_sigma_rad`]: 2° of change per frame (TUM fr2_desk:
+/// 0.38° mean, 1.24° largest); rotations are well constrained by the images, so the prior
+/// barely acts on them.
+pub const DEFAULT_PRIOR_ROTATION_SIGMA_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// Default [`MotionPriorConfig::weight`].
+pub const DEFAULT_PRIOR_WEIGHT: f64 = 0.03;
+
 /// DVO parameters. Start from [`DvoConfig::paper`] (the default) or [`DvoConfig::release`]
 /// and override fields; [`DvoConfig::validate`] checks them (the tracker calls it).
-#[derive(Debug, Clone, Copy, PartialEq)]
+///
+/// Serialised (JSON config files) field by field with these names; missing fields take the
+/// default, unknown ones are an error.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct DvoConfig {
     /// Pyramid levels at most (level 0 = input resolution, each next one half the size); an image
     /// too small for that many uses as many as keep the coarsest side ≥
     /// [`crate::pyramid::MIN_LEVEL_SIDE_PX`] ([`Self::levels_for`]). Default [`DEFAULT_LEVELS`].
     pub levels: usize,
     /// The finest level the solver runs on (0 = full resolution). Default 1 (320×240 for VGA):
-    /// see the README's DVO performance section for what level 0 costs and buys.
+    /// see docs/method.md ("Dense visual odometry") for what level 0 costs and buys.
     pub finest_level: usize,
     /// LM candidate evaluations per level at most.
     pub max_iterations_per_level: usize,
@@ -159,13 +219,18 @@ pub struct DvoConfig {
     /// Start from the previous converged motion instead of identity when the caller gives no
     /// initial guess (constant-velocity prior).
     pub init_from_previous_motion: bool,
+    /// A Gaussian prior pulling the estimate towards the previous converged motion (constant
+    /// velocity): resolves what the images leave ambiguous (the sideways-translation / yaw
+    /// valley of a distant, flat background) in favour of a smooth camera path. `None` = off.
+    pub motion_prior: Option<MotionPriorConfig>,
     /// Reference pixels whose intensity gradient magnitude is below this (gray units per pixel
     /// of their level) are not used: they add almost nothing to the normal equations but cost
     /// as much as any other point. 0 uses every pixel with depth.
     pub min_gradient_per_px: f32,
     /// Reference depths below this are not used, metres.
     pub min_depth_m: f32,
-    /// Reference depths above this are not used, metres (∞ = no limit).
+    /// Reference depths above this are not used, metres (∞ = no limit; `null` in JSON).
+    #[serde(with = "crate::serde_util::f32_infinite_as_null")]
     pub max_depth_m: f32,
 }
 
@@ -177,8 +242,8 @@ impl Default for DvoConfig {
 
 impl DvoConfig {
     /// The paper's weights (k_I 48/255, k_Z 0.5 m, γ 0.001) with the release's LM schedule
-    /// (×3 on rejection, ÷1.5 on acceptance, stop > 200, ≤ 40 iterations; algorithm.md
-    /// §2 / §9 Q6–Q8) except λ₀ = [`LM_LAMBDA_INITIAL`] instead of 0.1 and 5 levels instead of 4
+    /// (×3 on rejection, ÷1.5 on acceptance, stop > 200, ≤ 40 iterations; docs/method.md)
+    /// except λ₀ = [`LM_LAMBDA_INITIAL`] instead of 0.1 and 5 levels instead of 4
     /// ([`DEFAULT_LEVELS`]; both measured, see there).
     pub fn paper() -> Self {
         Self {
@@ -197,13 +262,29 @@ impl DvoConfig {
             min_usable_pixels: 1000,
             ignore_dilation_radius_px: 4,
             init_from_previous_motion: false,
+            motion_prior: None,
             min_gradient_per_px: MIN_GRADIENT_PER_PX,
             min_depth_m: 0.0,
             max_depth_m: f32::INFINITY,
         }
     }
 
-    /// The Matlab release's weights: k_I level schedule, k_Z 0.25 m, γ 0.01 (algorithm.md §2).
+    /// The closed loop's default: the paper's profile with the depth term weighted up (γ 30, k_Z
+    /// 5 cm) and the [`MotionPriorConfig`] on. When moving objects are only partly masked, the
+    /// geometry of the static background and the prior hold the motion where the photometric
+    /// term alone follows the unmasked parts (docs/method.md has the measurements). Without a
+    /// mask (a static scene) the prior is off and only the depth weighting differs from
+    /// [`Self::paper`].
+    pub fn closed_loop() -> Self {
+        Self {
+            k_depth_m: CLOSED_LOOP_K_DEPTH_M,
+            depth_weight_gamma: CLOSED_LOOP_DEPTH_WEIGHT,
+            motion_prior: Some(MotionPriorConfig::default()),
+            ..Self::paper()
+        }
+    }
+
+    /// The Matlab release's weights: k_I level schedule, k_Z 0.25 m, γ 0.01 (docs/method.md).
     pub fn release() -> Self {
         Self {
             k_intensity: IntensityThreshold::ReleaseSchedule,
@@ -271,6 +352,24 @@ impl DvoConfig {
         if !(self.depth_weight_gamma.is_finite() && self.depth_weight_gamma >= 0.0) {
             return bad("depth_weight_gamma", self.depth_weight_gamma, "finite and >= 0");
         }
+        if let Some(prior) = &self.motion_prior {
+            for (name, value) in [
+                ("motion_prior.translation_sigma_m", prior.translation_sigma_m),
+                ("motion_prior.rotation_sigma_rad", prior.rotation_sigma_rad),
+                ("motion_prior.weight", prior.weight),
+            ] {
+                if !(value.is_finite() && value > 0.0) {
+                    return bad(name, value, "finite and > 0");
+                }
+            }
+            if !(0.0..=1.0).contains(&prior.full_weight_ignored_fraction) {
+                return bad(
+                    "motion_prior.full_weight_ignored_fraction",
+                    prior.full_weight_ignored_fraction,
+                    "a fraction in [0, 1]",
+                );
+            }
+        }
         if !(self.max_final_cost_fraction > 0.0 && self.max_final_cost_fraction <= 1.0) {
             return bad(
                 "max_final_cost_fraction",
@@ -332,7 +431,8 @@ impl DvoConfig {
         }
     }
 
-    fn cost_at_level(&self, level: usize) -> CostParams {
+    /// The robust-cost constants of pyramid `level` (at or above [`Self::finest_level`]).
+    pub fn cost_at_level(&self, level: usize) -> CostParams {
         CostParams {
             k_intensity: self.k_intensity.at_level(level),
             k_depth_m: self.k_depth_m,
@@ -432,6 +532,9 @@ pub struct DvoEstimator {
     /// Ignore mask per level, 0/1 (level 0 only allocated when it is used).
     ignore: Vec<Vec<u8>>,
     column_scratch: Vec<u32>,
+    /// Of the finest level's usable reference pixels, the fraction the ignore mask removed
+    /// (set by [`Self::prepare_reference`]).
+    ignored_fraction: f64,
 }
 
 impl DvoEstimator {
@@ -480,6 +583,7 @@ impl DvoEstimator {
             points,
             ignore,
             column_scratch: Vec::with_capacity(size.width),
+            ignored_fraction: 0.0,
         })
     }
 
@@ -562,6 +666,7 @@ impl DvoEstimator {
             };
             let pts = &mut self.points[l];
             pts.clear();
+            let mut ignored = 0usize;
             let k = level.intrinsics;
             let (fx_inv, fy_inv) = (1.0 / k.fx as f32, 1.0 / k.fy as f32);
             let (cx, cy) = (k.cx as f32, k.cy as f32);
@@ -594,6 +699,7 @@ impl DvoEstimator {
                         }
                     }
                     if have_mask && ignore_row[x] != 0 {
+                        ignored += 1;
                         continue;
                     }
                     pts.push(ReferencePoint {
@@ -601,6 +707,9 @@ impl DvoEstimator {
                         intensity: g,
                     });
                 }
+            }
+            if l == finest {
+                self.ignored_fraction = ignored as f64 / (ignored + pts.len()).max(1) as f64;
             }
         }
         Ok(())
@@ -634,10 +743,12 @@ impl DvoEstimator {
         initial_current_from_reference: Option<&Isometry3<f64>>,
     ) -> Result<DvoEstimate> {
         self.prepare_reference(reference, ignore_in_reference)?;
-        self.estimate_prepared(current, initial_current_from_reference)
+        self.estimate_prepared(current, initial_current_from_reference, None)
     }
 
-    /// [`Self::estimate`] with the reference already prepared by [`Self::prepare_reference`].
+    /// [`Self::estimate`] with the reference already prepared by [`Self::prepare_reference`],
+    /// and the predicted motion for [`DvoConfig::motion_prior`] (ignored when the prior is off;
+    /// no prediction, no prior).
     ///
     /// # Errors
     /// As [`Self::estimate`].
@@ -647,6 +758,7 @@ impl DvoEstimator {
         &mut self,
         current: &ImagePyramid,
         initial_current_from_reference: Option<&Isometry3<f64>>,
+        prior: Option<&Isometry3<f64>>,
     ) -> Result<DvoEstimate> {
         self.check_pyramid("current pyramid", current)?;
         let cfg = self.config;
@@ -704,12 +816,30 @@ impl DvoEstimator {
                 step_tolerance: schedule.step_tolerance * f64::from(1u32 << (l - cfg.finest_level)),
                 ..schedule
             };
+            let level_prior = match (cfg.motion_prior, prior) {
+                (Some(p), Some(motion)) => {
+                    let ramp = if p.full_weight_ignored_fraction > 0.0 {
+                        (self.ignored_fraction / p.full_weight_ignored_fraction).min(1.0)
+                    } else {
+                        1.0
+                    };
+                    let scale = ramp * p.weight * points.len() as f64 * f64::from(cost.saturated_point());
+                    let t = scale / (p.translation_sigma_m * p.translation_sigma_m);
+                    let r = scale / (p.rotation_sigma_rad * p.rotation_sigma_rad);
+                    Some(solver::MotionPrior {
+                        current_from_reference: *motion,
+                        information: [t, t, t, r, r, r],
+                    })
+                }
+                _ => None,
+            };
             match solver::optimize_level(
                 points,
                 level.size().width,
                 &target,
                 &cost,
                 &level_schedule,
+                level_prior.as_ref(),
                 &mut level_pose,
             ) {
                 Ok(res) => {
@@ -792,9 +922,10 @@ fn missing_level(level: usize) -> Error {
 
 /// Frame-to-frame DVO over a sequence: keeps the previous frame's pyramid as the reference.
 ///
-/// Everything is allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds the new
-/// frame's pyramid once, estimates the motion from the previous frame, then swaps the two
-/// pyramids (no copy, no allocation).
+/// The pyramids and scratch are allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds
+/// the new frame's pyramid once, estimates the motion from the previous frame, then swaps the
+/// two pyramids (no copy). `track` is not free of allocations: it makes a few now and then
+/// (counted in `tests/detector_alloc.rs`).
 #[derive(Debug, Clone)]
 pub struct DvoTracker {
     estimator: DvoEstimator,
@@ -884,9 +1015,11 @@ impl DvoTracker {
             None
         };
         let initial = initial_current_from_reference.copied().or(prior);
-        let estimate = self
-            .estimator
-            .estimate_prepared(&self.current, initial.as_ref())?;
+        let estimate = self.estimator.estimate_prepared(
+            &self.current,
+            initial.as_ref(),
+            self.previous_motion.as_ref(),
+        )?;
         std::mem::swap(&mut self.reference, &mut self.current);
         self.previous_motion = estimate.is_converged().then_some(estimate.current_from_reference);
         Ok(Some(estimate))

@@ -5,14 +5,15 @@
 //! (λ ← λ / down-factor, the candidate's system becomes the current one) or reverts to the
 //! current pose (λ ← λ · up-factor, the current system is reused, no extra pass). A level stops
 //! on a small step (‖δ‖∞ below the tolerance), the iteration limit, or λ overflow
-//! (algorithm.md §4.5, fixing the release's one-iteration-late, never-reverted rejection §4.1 f).
+//! (docs/method.md, "Dense visual odometry": this fixes the authors' release, whose rejection
+//! came one iteration late and was never reverted).
 
 use nalgebra::{Isometry3, Matrix6, Vector6};
 
 use super::residuals::{
     accumulate_normal_equations, CostParams, NormalEquations, ReferencePoint, TargetView,
 };
-use crate::geometry::{se3_exp, Twist};
+use crate::geometry::{se3_exp, se3_log, Twist};
 
 /// Smallest eigenvalue of the Jacobi-scaled H (unit diagonal, eigenvalues in [0, 6]) below
 /// which the motion is not observable from the data (e.g. a textureless fronto-parallel
@@ -24,6 +25,45 @@ pub const DEGENERATE_MIN_SCALED_EIGENVALUE: f64 = 1e-7;
 /// A diagonal entry of H below this fraction of the largest one means a direction with no
 /// constraint at all (the Jacobi scaling would divide by ~0).
 const DEGENERATE_DIAGONAL_RATIO: f64 = 1e-12;
+
+/// A Gaussian prior on the motion: ½ Σᵢ informationᵢ · eᵢ² with e = log(T · T_prior⁻¹) (the
+/// twist, translation first, that takes the prior to the estimate), added to the robust cost.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionPrior {
+    /// The predicted motion.
+    pub current_from_reference: Isometry3<f64>,
+    /// Diagonal information per twist component (translation first), in the cost's units per
+    /// m² or rad².
+    pub information: [f64; 6],
+}
+
+impl MotionPrior {
+    /// Adds the prior's cost, gradient and (diagonal) Hessian at `current_from_reference` to
+    /// `ne`. With the left perturbation T ← exp(δ)·T, e(δ) ≈ e(0) + δ to first order.
+    pub fn add_to(&self, ne: &mut NormalEquations, current_from_reference: &Isometry3<f64>) {
+        let error = self.error(current_from_reference);
+        let mut diagonal = 0;
+        for i in 0..6 {
+            let info = self.information[i];
+            ne.cost += 0.5 * info * error[i] * error[i];
+            ne.gradient[i] += info * error[i];
+            ne.hessian_upper[diagonal] += info;
+            diagonal += 6 - i;
+        }
+    }
+
+    /// The prior's cost at `current_from_reference`.
+    pub fn cost(&self, current_from_reference: &Isometry3<f64>) -> f64 {
+        let error = self.error(current_from_reference);
+        (0..6)
+            .map(|i| 0.5 * self.information[i] * error[i] * error[i])
+            .sum()
+    }
+
+    fn error(&self, current_from_reference: &Isometry3<f64>) -> Twist {
+        se3_log(&(current_from_reference * self.current_from_reference.inverse()))
+    }
+}
 
 /// The Levenberg–Marquardt schedule.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -120,14 +160,27 @@ pub fn optimize_level(
     target: &TargetView<'_>,
     cost: &CostParams,
     schedule: &LmSchedule,
+    prior: Option<&MotionPrior>,
     current_from_reference: &mut Isometry3<f64>,
 ) -> Result<LevelResult, LevelError> {
-    let mut ne = accumulate_normal_equations(points, row_width, target, current_from_reference, cost);
-    if !is_finite_system(&ne) {
+    let data = accumulate_normal_equations(points, row_width, target, current_from_reference, cost);
+    if !is_finite_system(&data) {
         return Err(LevelError::NonFinite);
     }
-    if is_degenerate(&ne.hessian()) {
+    // Degeneracy is a property of the data: a prior must not hide an unobservable direction.
+    if is_degenerate(&data.hessian()) {
         return Err(LevelError::Degenerate);
+    }
+    let evaluate = |pose: &Isometry3<f64>| {
+        let mut ne = accumulate_normal_equations(points, row_width, target, pose, cost);
+        if let Some(prior) = prior {
+            prior.add_to(&mut ne, pose);
+        }
+        ne
+    };
+    let mut ne = data;
+    if let Some(prior) = prior {
+        prior.add_to(&mut ne, current_from_reference);
     }
     let mut lambda = schedule.lambda_initial;
     let mut iterations = 0;
@@ -139,7 +192,7 @@ pub fn optimize_level(
         };
         iterations += 1;
         let candidate = se3_exp(&step) * *current_from_reference;
-        let cand_ne = accumulate_normal_equations(points, row_width, target, &candidate, cost);
+        let cand_ne = evaluate(&candidate);
         if !is_finite_system(&cand_ne) {
             return Err(LevelError::NonFinite);
         }
@@ -159,6 +212,11 @@ pub fn optimize_level(
             stop = LevelStop::SmallStep;
             break;
         }
+    }
+    // The result reports the data's cost (the final-cost checks judge how well the images
+    // agree, not how far the motion is from its prediction).
+    if let Some(prior) = prior {
+        ne.cost -= prior.cost(current_from_reference);
     }
     Ok(LevelResult {
         iterations,

@@ -2,8 +2,9 @@
 
 use nalgebra::{Point2, Point3};
 
-/// Pinhole intrinsics in pixels (0-based pixel centres, algorithm.md §0). Lens distortion is
-/// [`super::distortion::CameraModel`]'s; odometry and detection see undistorted images only.
+/// Pinhole intrinsics in pixels (0-based pixel centres, docs/method.md "Conventions"). Lens
+/// distortion is [`super::distortion::CameraModel`]'s; odometry and detection see undistorted
+/// images only.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PinholeIntrinsics {
     /// Focal length along x, pixels.
@@ -58,7 +59,7 @@ impl PinholeIntrinsics {
     /// Intrinsics of the image halved `level` times by 2×2 averaging.
     ///
     /// A 2×2 box mean puts the centre of coarse pixel j at fine coordinate 2j + 0.5, so
-    /// f ← f/2 and c ← (c + 0.5)/2 − 0.5 per halving (algorithm.md §4.1 b).
+    /// f ← f/2 and c ← (c + 0.5)/2 − 0.5 per halving (as the authors' release does).
     pub fn at_level(&self, level: u32) -> Self {
         let mut k = *self;
         for _ in 0..level {
@@ -78,7 +79,7 @@ impl PinholeIntrinsics {
     }
 }
 
-/// Published intrinsics of the datasets occmask knows (algorithm.md §2.1), all 640×480.
+/// Published intrinsics of the datasets occmask knows (docs/method.md "Datasets"), all 640×480.
 pub mod presets {
     use super::PinholeIntrinsics;
 

@@ -1,6 +1,6 @@
 //! Pinhole camera model, lens distortion and SE(3) Lie-group helpers (pure math, no I/O).
 //!
-//! # Conventions (algorithm.md §0), stated once for the whole crate
+//! # Conventions (docs/method.md), stated once for the whole crate
 //! - Pixels are 0-based: x = column (right), y = row (down); (cx, cy) use the same convention.
 //! - Camera frames are optical frames: +x right, +y down, +z forward.
 //! - Transforms are named `target_from_source` and compose right to left:

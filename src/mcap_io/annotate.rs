@@ -3,7 +3,7 @@
 //!
 //! Copy mode registers every input schema and channel under its own ID first
 //! (`add_schema_with_id`/`add_channel_with_id`: registering new channels before them makes
-//! mcap 0.26 panic on ID collisions, ecosystem.md §1.3), then the new schemas and channels get
+//! mcap 0.26 panic on ID collisions), then the new schemas and channels get
 //! the next free IDs. Input messages are written with their original header (channel,
 //! sequence, log and publish time) and bytes.
 //!
@@ -74,6 +74,9 @@ pub const METADATA_PROCESS: &str = "occmask.process";
 /// Key in [`METADATA_PROCESS`]: the pose channel whose frame `world` is (the odometry starts at
 /// that channel's pose); absent when `world` is the first processed camera.
 pub const METADATA_ODOMETRY_ANCHOR: &str = "odometry_anchor_topic";
+/// Key in [`METADATA_PROCESS`]: the DVO, detector and failure-policy parameters used, as the
+/// JSON that `occmask process --config` reads.
+pub const METADATA_PROCESSOR_CONFIG: &str = "processor_config";
 
 /// The path is published at most this often (data time): enough for a live-looking
 /// trajectory without one message per frame.

@@ -1,8 +1,8 @@
 //! Reading and writing occmask's MCAP files.
 //!
 //! Every message uses a Foxglove well-known schema with protobuf encoding (the message structs
-//! and embedded descriptors of the `foxglove` crate), written through [`mcap::Writer`]
-//! (design: ecosystem.md §4). The topic and frame names below are the contract between
+//! and embedded descriptors of the `foxglove` crate), written through [`mcap::Writer`].
+//! The topic and frame names below are the contract between
 //! `occmask convert`, `occmask process` and the viewer; the README's channel table lists them.
 //!
 //! - [`codec`]: sans-IO conversion between library types and Foxglove messages;

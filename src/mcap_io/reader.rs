@@ -158,7 +158,7 @@ impl McapFileReader {
     pub fn messages(&self) -> Result<impl Iterator<Item = Result<ReadMessage>> + '_> {
         // The sans-IO reader with a record-length limit: `mcap::MessageStream` (mcap 0.26)
         // decompresses chunks without one, and a corrupt record length inside a chunk made it
-        // panic with "capacity overflow" (found by fuzzing, README "Fuzzing").
+        // panic with "capacity overflow" (found by fuzzing, fuzz/README.md).
         let reader = LinearReader::new_with_options(
             LinearReaderOptions::default().with_record_length_limit(self.map.len()),
         );

@@ -35,7 +35,7 @@ pub enum Compression {
 }
 
 /// Uncompressed bytes per chunk. A 640×480 frame pair is ~1.2 MB, so 4 MiB holds a few
-/// frames: enough context for zstd, small enough for seeking (ecosystem.md §1.3).
+/// frames: enough context for zstd, small enough for seeking.
 pub const DEFAULT_CHUNK_SIZE_BYTES: u64 = 4 * 1024 * 1024;
 
 /// zstd worker threads. One: the converter decodes depth on the rayon pool at the same

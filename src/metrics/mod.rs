@@ -1,7 +1,8 @@
 //! Evaluation metrics (pure): segmentation scores of masks against ground truth
-//! (algorithm.md §7.1, §9-Q11) and trajectory errors (RPE with TUM `evaluate_rpe` semantics,
-//! ATE after rigid alignment, §7.2).
+//! and trajectory errors (RPE with TUM `evaluate_rpe` semantics, ATE after rigid alignment);
+//! definitions in docs/method.md, "Evaluation".
 
+pub mod free_space;
 pub mod segmentation;
 pub mod trajectory;
 

@@ -1,6 +1,6 @@
 //! Per-frame precision / recall / F1 of a moving-object mask, averaged over a sequence.
 //!
-//! Following algorithm.md §9-Q11: F1 = 2TP / (2TP + FP + FN) per frame (an empty prediction on
+//! As docs/method.md, "Evaluation": F1 = 2TP / (2TP + FP + FN) per frame (an empty prediction on
 //! a non-empty ground truth scores 0, never NaN), averaged over the frames whose ground truth
 //! is non-empty; frames with an empty ground truth contribute their false-positive pixel
 //! fraction FP / (W·H) instead.

@@ -1,7 +1,7 @@
 //! Trajectory errors of estimated camera-to-world poses against ground truth.
 //!
 //! * [`rpe`] / [`rpe_stamped`]: relative pose error with the semantics of TUM's
-//!   `evaluate_rpe.py --fixed_delta --delta_unit f` (algorithm.md §7.2): for frame pairs
+//!   `evaluate_rpe.py --fixed_delta --delta_unit f` (docs/method.md, "Evaluation"): for frame pairs
 //!   (i, j = i + Δ) with j < N − 1 (the script drops pairs ending on the last frame),
 //!   a = P_j⁻¹·P_i, b = Q_j⁻¹·Q_i, E = a⁻¹·b; translational error ‖t(E)‖ (m), rotational error
 //!   arccos(clamp((tr R(E) − 1)/2)) in degrees; RMSE over the pairs.

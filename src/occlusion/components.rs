@@ -1,5 +1,6 @@
 //! Connected components, small-object suppression, occlusion prediction into the newly
-//! discovered area (algorithm.md §5.1, §9-Q5) and pruning of unattached predictions (§5.3).
+//! discovered area (paper Eq. 10, as the release implements it) and pruning of unattached
+//! predictions (docs/method.md steps 10 and 12).
 //! Labelling by runs ([`super::runs`]), on preallocated buffers.
 
 use super::runs::{Run, RunLabelling};
@@ -368,7 +369,7 @@ impl Components {
     }
 
     /// Breadth-first ring growth of component `k` of the last labelling into the shared
-    /// target set (algorithm.md §5.1, release sign A(n) + Z(n) − Z(ũ)). Returns the pixels
+    /// target set (paper Eq. 10 with the release's sign A(n) + Z(n) − Z(ũ)). Returns the pixels
     /// filled and their bounding box.
     fn predict(
         &mut self,

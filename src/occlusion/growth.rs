@@ -1,4 +1,4 @@
-//! Appearance-gated object completion (not in the paper; see the README's "Detector accuracy").
+//! Appearance-gated object completion (not in the paper; see docs/method.md, "Deviations").
 //!
 //! Occlusion accumulation only sees the pixels where an object covers something farther away.
 //! An object that stood still and starts moving occludes nothing inside its old footprint: its
@@ -24,7 +24,7 @@
 //!     surface touching an object at the same depth is never swallowed in one frame.
 //!
 //! A grown pixel enters the mask and gets the accumulation of the pixel it grew from, moved to
-//! its depth like §5.1's prediction (A(f) + Z(f) − Z(n), at least just above τ_α): the
+//! its depth like Eq. 10's prediction (A(f) + Z(f) − Z(n), at least just above τ_α): the
 //! transport then carries it like any accumulated pixel, background reappearing behind it
 //! resets it (τ_β), and an object that stops keeps its mask as the paper's objects do. Without
 //! detected objects (a static view) the stage does nothing but keep the gray image.
@@ -37,7 +37,8 @@ use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, MASK_SET};
 
 /// Parameters of appearance-gated object completion ([`OcclusionConfig::appearance_growth`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct AppearanceGrowthConfig {
     /// A pixel must change by more than this much gray (0..1 scale) against the previous image
     /// warped with the camera motion to be grown into.
@@ -57,7 +58,7 @@ pub struct AppearanceGrowthConfig {
     /// sample only.
     pub photometric_search_radius_px: usize,
     /// A grown pixel inherits the accumulation of the pixel it grew from (moved to its depth,
-    /// §5.1's rule); false = it gets exactly τ_α · (1 + `accumulation_margin`).
+    /// Eq. 10's rule); false = it gets exactly τ_α · (1 + `accumulation_margin`).
     pub inherit_accumulation: bool,
     /// Only mask pixels that were object pixels in the previous frame too (at their
     /// static-world warp position) seed the growth: an object is grown from its second frame
@@ -1190,7 +1191,7 @@ mod tests {
     #[test]
     fn grown_accumulation_follows_the_depth_and_stays_above_tau_alpha() {
         // A slanted box face (depth rising 1 mm per column towards the left): the accumulation
-        // moves with the depth like §5.1's prediction; a seed with A barely above τ_α gives its
+        // moves with the depth like Eq. 10's prediction; a seed with A barely above τ_α gives its
         // neighbours at least τ_α · (1 + margin).
         let config = OcclusionConfig::default();
         let growth = unbounded();

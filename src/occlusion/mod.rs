@@ -1,7 +1,7 @@
 //! Occlusion-accumulation moving-object detector (Kim, Kim & Kim, ICRA 2020).
 //!
 //! Per frame, with the camera motion `current_from_previous` (= exp(ξ_i^{i+1}), see
-//! [`crate::geometry`]), the detector runs algorithm.md §1 steps 2–13 in the authors' order:
+//! [`crate::geometry`]), the detector runs docs/method.md steps 2–13 in the authors' order:
 //!
 //! 1. warp field: back-project pixel u with the *previous* compensated depth Zc_i(u), move it by
 //!    `previous_from_current` = exp(−ξ), project, round to the nearest pixel n(u) (valid only
@@ -14,12 +14,12 @@
 //! 6. newly discovered area Ñ: current depth known but the warped previous depth is not;
 //! 7. 8-connected labelling of {A > τ_α}; components smaller than the (area-scaled) object
 //!    threshold are erased from A, larger ones grow their accumulation into Ñ by breadth-first
-//!    rings (§5.1, the release's sign A(n) + Z(n) − Z(ũ), 5 cm depth gate);
+//!    rings (paper Eq. 10 with the release's sign A(n) + Z(n) − Z(ũ), 5 cm depth gate);
 //! 8. O = {A > τ_α}; predicted components of P = (P̂ ∨ Ñ) ∧ O that do not touch a non-predicted
-//!    object pixel (4-adjacency, §5.3 recommendation) are erased from A and O, except the
+//!    object pixel (4-adjacency, docs/method.md step 12) are erased from A and O, except the
 //!    remainder of an object leaving the view (it holds pixels of P̂ and reaches the border);
 //! 9. the mask is O;
-//! 10. appearance-gated object completion (not in the paper, [`AppearanceGrowthConfig`], on by
+//! 10. appearance-gated object completion (not in the paper, [`AppearanceGrowthConfig`], off by
 //!     default, needs the gray image: [`OcclusionDetector::update_with_gray`]): objects grow into
 //!     neighbours with continuous depth whose intensity changed against the previous image
 //!     warped with the camera motion; grown pixels join O and A.
@@ -42,6 +42,7 @@ pub mod transport;
 use std::time::Instant;
 
 use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
@@ -54,8 +55,9 @@ pub use growth::AppearanceGrowthConfig;
 use growth::{AppearanceGrowth, GrowthFrame};
 use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch};
 
-/// Functional form of the truncation thresholds τ_α and τ_β (algorithm.md §9-Q1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Functional form of the truncation thresholds τ_α and τ_β (paper Eq. 4–6; docs/method.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum ThresholdForm {
     /// τ = coefficient · Z (the authors' release; coefficients in m/m, i.e. unitless).
     #[default]
@@ -64,9 +66,10 @@ pub enum ThresholdForm {
     Quadratic,
 }
 
-/// Which depth back-projects a current pixel for the warp, and what ΔZ compares
-/// (algorithm.md §9-Q3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Which depth back-projects a current pixel for the warp, and what ΔZ compares (paper Eq. 1–2;
+/// docs/method.md step 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum WarpDepth {
     /// The release: back-project pixel u with the previous compensated depth Zc_i(u) and compare
     /// raw depths, ΔZ = Zc_i(n(u)) − Zc_{i+1}(u).
@@ -78,8 +81,9 @@ pub enum WarpDepth {
     Current,
 }
 
-/// Adjacency used by the pruning test of predicted areas (algorithm.md §5.3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Adjacency used by the pruning test of predicted areas (docs/method.md step 12).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Adjacency {
     /// Left, right, up, down (the release's stencil intent).
     #[default]
@@ -88,8 +92,12 @@ pub enum Adjacency {
     Eight,
 }
 
-/// Every parameter of the detector, with the release defaults (algorithm.md §2).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Every parameter of the detector, with the release defaults (docs/method.md, "Parameters").
+///
+/// Serialised (JSON config files) field by field with these names; missing fields take the
+/// default, unknown ones are an error; `null` switches an optional stage off.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct OcclusionConfig {
     /// α of τ_α: accumulation below τ_α is not an object (unitless for linear, 1/m for quadratic).
     pub alpha: f32,
@@ -97,13 +105,18 @@ pub struct OcclusionConfig {
     pub beta: f32,
     /// Linear (release) or quadratic (paper) thresholds.
     pub threshold_form: ThresholdForm,
-    /// Minimum object component size at 640 × 480 in pixels; scaled by image area (§9-Q13).
+    /// Fraction of an accumulation at or below τ_α kept for the next frame (0 = the paper's
+    /// truncation, Eq. 5, which clears it). Above 0 the accumulation is leaky: a slow, steady
+    /// depth decrease (an object approaching head-on) adds up over frames instead of being
+    /// cleared every frame, while noise decays. Values in [0, 1).
+    pub sub_threshold_retention: f32,
+    /// Minimum object component size at 640 × 480 in pixels; scaled by image area.
     pub min_object_pixels_vga: usize,
     /// Prediction only crosses 4-neighbour edges whose depth step is below this (m).
     pub prediction_depth_gate_m: f32,
     /// Prediction stops after a ring that contributed at most this many neighbour terms.
     pub prediction_stop_terms: usize,
-    /// Grow accumulation into the newly discovered area (§5); off = skip prediction and pruning.
+    /// Grow accumulation into the newly discovered area (Eq. 10); off = skip prediction and pruning.
     pub predict_newly_discovered: bool,
     /// Adjacency of the pruning test.
     pub prune_adjacency: Adjacency,
@@ -113,7 +126,7 @@ pub struct OcclusionConfig {
     /// object structures thinner than 2r+1 px are erased from A like small components (except
     /// near the border, see `thin_structure_border_margin_px`). 0 = off (the release). Not in the paper: it
     /// removes the 1–3 px strips that flickering Kinect depth edges leave along long edges of
-    /// static scenes (see the README's detector section).
+    /// static scenes (see docs/method.md, "Deviations").
     pub thin_structure_radius_px: usize,
     /// Thin structures within this many pixels of the image border are kept: objects entering
     /// the view start as thin slivers there.
@@ -132,7 +145,9 @@ pub struct OcclusionConfig {
     /// Appearance-gated object completion (not in the paper, see [`AppearanceGrowthConfig`]):
     /// after the mask is final, objects grow into neighbouring pixels with continuous depth
     /// whose intensity changed against the previous image warped with the camera motion. Needs
-    /// the gray image ([`OcclusionDetector::update_with_gray`]); `None` = off (the paper).
+    /// the gray image ([`OcclusionDetector::update_with_gray`]); `None` = off (the paper, and
+    /// the default: on real people the changing shadows at their feet let it grow over the
+    /// floor, which then misleads the closed loop's odometry; docs/method.md has the figures).
     pub appearance_growth: Option<AppearanceGrowthConfig>,
 }
 
@@ -142,6 +157,7 @@ impl Default for OcclusionConfig {
             alpha: 0.15,
             beta: 0.225,
             threshold_form: ThresholdForm::Linear,
+            sub_threshold_retention: 0.0,
             min_object_pixels_vga: 500,
             prediction_depth_gate_m: 0.05,
             prediction_stop_terms: 10,
@@ -152,7 +168,7 @@ impl Default for OcclusionConfig {
             thin_structure_border_margin_px: 16,
             prune_exit_margin_px: EXIT_MARGIN_PX,
             motion_check_margin: Some(MOTION_CHECK_MARGIN),
-            appearance_growth: Some(AppearanceGrowthConfig::default()),
+            appearance_growth: None,
         }
     }
 }
@@ -160,7 +176,7 @@ impl Default for OcclusionConfig {
 /// Pixels of a VGA image, the resolution the object threshold is given for.
 const VGA_PIXELS: usize = 640 * 480;
 
-/// Default `motion_check_margin`. Measured (README "Accuracy"): with correct motions
+/// Default `motion_check_margin`. Measured (docs/accuracy.md): with correct motions
 /// the motion's consistency minus identity's is ≥ −0.02 on every synthetic frame and ≥ −0.07 on
 /// the real TUM / 7-Scenes frames; the two ground-truth glitches found there score −0.18 and
 /// −0.23. 0.1 lies between.
@@ -201,6 +217,13 @@ impl OcclusionConfig {
         positive("alpha", self.alpha)?;
         positive("beta", self.beta)?;
         positive("prediction_depth_gate_m", self.prediction_depth_gate_m)?;
+        if !(0.0..1.0).contains(&self.sub_threshold_retention) {
+            return Err(Error::InvalidParameter {
+                name: "sub_threshold_retention",
+                value: self.sub_threshold_retention.to_string(),
+                expected: "a fraction in [0, 1)".into(),
+            });
+        }
         if let Some(margin) = self.motion_check_margin {
             positive("motion_check_margin", margin)?;
         }
@@ -262,7 +285,7 @@ pub struct OcclusionStats {
     pub growth_us: u64,
 }
 
-/// Per-sequence detector state (algorithm.md §1: Zc, A, P, B and scratch buffers).
+/// Per-sequence detector state (docs/method.md: Zc, A, P, B and scratch buffers).
 #[derive(Debug, Clone)]
 pub struct OcclusionDetector {
     config: OcclusionConfig,
@@ -579,7 +602,7 @@ impl OcclusionDetector {
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
-        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, §5.3, the
+        // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, the
         // pruning's input). Pruning only removes pixels of P ⊆ O, so the mask size is
         // |O| − pruned, and pruning is skipped when P is empty.
         // O ⊆ O₀ ∪ predicted pixels: the transport zeroed A outside O₀ (A ≤ τ_α there, and the

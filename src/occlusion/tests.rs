@@ -349,7 +349,7 @@ fn translation_of_the_camera_compensates_static_geometry() {
     let current_from_previous = Isometry3::translation(-0.05, 0.0, 0.0);
     let current = render(0.05);
     let mask = detector.update(&current, &current_from_previous).unwrap().clone();
-    // The release warp back-projects with the *previous* depth at the same pixel (§1 step 2), so
+    // The release warp back-projects with the *previous* depth at the same pixel (docs/method.md step 2), so
     // where the near box now covers pixels that were wall, the wall's (smaller) image motion is
     // used: a strip as wide as the difference of the two parallaxes (4.4 − 2.2 px) left of the
     // box's new left edge is flagged. Nothing else may be.

@@ -1,4 +1,4 @@
-//! Per-pixel state transport (algorithm.md §1 steps 2–9): warp field, depth compensation,
+//! Per-pixel state transport (docs/method.md steps 2–9): warp field, depth compensation,
 //! occlusion map ΔZ, carried A and P, accumulation, truncations and the newly discovered area,
 //! plus the initial labels of the object set {A > τ_α} (step 10's input) and its bounding box.
 //!
@@ -274,6 +274,7 @@ pub fn transport_with(
         quadratic: inputs.config.threshold_form == ThresholdForm::Quadratic,
         alpha: inputs.config.alpha,
         beta: inputs.config.beta,
+        retention: inputs.config.sub_threshold_retention,
     };
     let [terms_x, terms_y, terms_z] = &scratch.column_terms;
     let (terms_x, terms_y, terms_z) = (&terms_x[..width], &terms_y[..width], &terms_z[..width]);
@@ -382,7 +383,7 @@ struct WarpParameters {
     geometric: bool,
 }
 
-/// One row of the warp (algorithm.md §1 step 2): back-projects each pixel at the previous
+/// One row of the warp (docs/method.md step 2): back-projects each pixel at the previous
 /// compensated depth, or (`geometric`) at its measured depth where that is valid; `sources` gets
 /// the nearest previous pixel or `NO_SOURCE`, `qz` the warped point's depth z′. Branch-free, on
 /// equal-length slices, so it vectorises.
@@ -461,6 +462,8 @@ struct FinishParameters {
     quadratic: bool,
     alpha: f32,
     beta: f32,
+    /// `OcclusionConfig::sub_threshold_retention`.
+    retention: f32,
 }
 
 /// Output rows of [`finish_row`].
@@ -586,6 +589,7 @@ fn finish_block_generic(
     let (measured, sampled, carried_a) = (&measured[..len], &mut sampled[..len], &carried_a[..len]);
     let (zc_row, a_row, dz_row) = (&mut zc_row[..len], &mut a_row[..len], &mut dz_row[..len]);
     let (alpha, beta, quadratic, geometric) = (finish.alpha, finish.beta, finish.quadratic, finish.geometric);
+    let retention = finish.retention;
     let mut warped_count = 0u32;
     for i in 0..len {
         let warped = sources[i] != NO_SOURCE;
@@ -601,9 +605,15 @@ fn finish_block_generic(
         let tau_alpha = alpha * compensated_m * z_or_one;
         let tau_beta = beta * compensated_m * z_or_one;
         let accumulation = (if warped { carried_a[i] } else { 0.0 }) + delta_z_m;
-        let truncated = (accumulation <= tau_alpha) | (delta_z_m <= -tau_beta);
+        // Below τ_α the accumulation is kept at `retention` times its value (0 = the
+        // release's truncation); a reappearing background (ΔZ ≤ −τ_β) clears it.
+        let kept = if accumulation > tau_alpha {
+            accumulation
+        } else {
+            retention * (if accumulation > 0.0 { accumulation } else { 0.0 })
+        };
         zc_row[i] = compensated_m;
-        a_row[i] = if truncated { 0.0 } else { accumulation };
+        a_row[i] = if delta_z_m <= -tau_beta { 0.0 } else { kept };
         dz_row[i] = delta_z_m;
         warped_count += u32::from(warped);
     }
@@ -826,7 +836,7 @@ pub(super) fn object_mask_block_with(
     )
 }
 
-/// Reference implementation: the algorithm.md §1 steps as separate full-image passes, with f64
+/// Reference implementation: the docs/method.md steps as separate full-image passes, with f64
 /// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
 pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutputs<'_>) -> TransportCounts {
     let size = inputs.depth_m.size();
@@ -875,7 +885,7 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutp
         let carried_p = source.map_or(0, |n| inputs.predicted_previous.as_slice()[n]);
         let mut a = carried_a + delta_z;
         if a <= config.threshold(config.alpha, compensated) {
-            a = 0.0;
+            a = config.sub_threshold_retention * a.max(0.0);
         }
         if delta_z <= -config.threshold(config.beta, compensated) {
             a = 0.0;

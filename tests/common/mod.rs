@@ -5,6 +5,10 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod data;
+#[allow(unused_imports)] // not every test crate uses the data helpers
+pub use data::*;
+
 /// The repository root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -18,23 +22,36 @@ pub fn larr_fixture() -> PathBuf {
 /// TUM fr2 intrinsics at pyramid level 2, matching the 160×120 fixture.
 pub const FIXTURE_CAMERA: &str = "130.225,130.25,80.9,62.05";
 
-/// A shared real sequence (../shared/data/<name>); panics with a clear message when absent.
-pub fn shared_data(name: &str) -> PathBuf {
-    let path = repo().join("../shared/data").join(name);
-    assert!(
-        path.is_dir(),
-        "test data {} is missing: CI clones the repository with shared/ beside it",
-        path.display()
-    );
-    path
-}
-
 /// Runs `occmask` with `args`.
 pub fn occmask<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_occmask"))
         .args(args)
         .output()
         .expect("cannot start the occmask binary")
+}
+
+/// Runs `occmask args` with stdout a pipe whose reader is already gone (`occmask … | head` once
+/// head has exited) and asserts that the process ended on SIGPIPE, as a Unix filter does, with
+/// no panic message; `what` names the case in the assertion messages.
+#[cfg(unix)]
+pub fn assert_ends_quietly_on_a_closed_pipe<S: AsRef<std::ffi::OsStr>>(args: &[S], what: &str) {
+    use std::os::unix::process::ExitStatusExt;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_occmask"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("cannot start the occmask binary");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert!(!err.contains("panicked"), "{what}: {err}");
+    assert_eq!(
+        out.status.signal(),
+        Some(libc::SIGPIPE),
+        "{what}: {:?}: {err}",
+        out.status
+    );
 }
 
 /// stderr as text.

@@ -97,22 +97,12 @@ pub fn load_frame(frame: &FramePaths) -> Result<(GrayF32, DepthMeters), String> 
     Ok((gray, depth))
 }
 
-/// The repository's shared data folder (tests run from the crate root; CI clones `shared/`
-/// beside the repository).
-pub fn shared_data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("shared")
-        .join("data")
-        .join(name)
-}
-
 /// Largest gap between ground-truth samples to interpolate across (TUM mocap runs at
 /// ≈ 100 Hz, so 50 ms tolerates a few dropped samples).
 pub const GT_MAX_GAP_NS: u64 = 50_000_000;
 
 /// Relative pose error of one estimated motion `current_from_reference` against the ground
-/// truth b = Q_cur⁻¹·Q_ref, composed as TUM's evaluate_rpe (algorithm.md §7.2):
+/// truth b = Q_cur⁻¹·Q_ref, composed as TUM's evaluate_rpe (docs/method.md, "Evaluation"):
 /// E = a⁻¹·b; returns (‖t(E)‖ in mm, angle(E) in degrees).
 pub fn rpe(
     estimated_current_from_reference: &nalgebra::Isometry3<f64>,

@@ -50,6 +50,8 @@ pub struct FixtureSpec {
     pub ros_color_encoding: &'static str,
     /// Calibration messages.
     pub with_calibration: bool,
+    /// Ground-truth poses only from this frame on (a pose stream that starts late).
+    pub first_ground_truth_frame: usize,
 }
 
 impl Default for FixtureSpec {
@@ -61,6 +63,7 @@ impl Default for FixtureSpec {
             indexed: true,
             ros_color_encoding: "bgr8",
             with_calibration: true,
+            first_ground_truth_frame: 0,
         }
     }
 }
@@ -502,7 +505,9 @@ pub fn write_fixture<W: Write + Seek>(sink: W, flavor: Flavor, spec: &FixtureSpe
         if spec.with_calibration {
             msgs.push((tc + TRANSPORT_NS, ch.info, info_msg(flavor, spec.size, tc)));
         }
-        msgs.push((tc + TRANSPORT_NS, ch.gt, pose_msg(flavor, tc, &gt_pose(i))));
+        if i >= spec.first_ground_truth_frame {
+            msgs.push((tc + TRANSPORT_NS, ch.gt, pose_msg(flavor, tc, &gt_pose(i))));
+        }
         if let Some(id) = ch.gt_mask {
             let mask = Mask::from_fn(spec.size, |x, y| if square(i, x, y) { MASK_SET } else { 0 });
             let msg = codec::mask_image(tc, FRAME_ID, &mask).unwrap();
@@ -548,6 +553,12 @@ pub struct TestProcessor {
 }
 
 impl FrameProcessor for TestProcessor {
+    fn push(&mut self, frame: &RgbdFrame<'_>) -> Result<Vec<ProcessedFrame>> {
+        self.process(frame).map(|result| vec![result])
+    }
+}
+
+impl TestProcessor {
     fn process(&mut self, frame: &RgbdFrame<'_>) -> Result<ProcessedFrame> {
         let size = frame.gray.size();
         let mask = match &self.previous {
@@ -592,6 +603,7 @@ pub fn test_factory(
     intrinsics: PinholeIntrinsics,
     _size: ImageSize,
     _mode: PoseMode,
+    _config: &occmask::pipeline::ProcessorConfig,
 ) -> Result<Box<dyn FrameProcessor>> {
     Ok(Box::new(TestProcessor {
         previous: None,

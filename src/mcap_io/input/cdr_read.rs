@@ -5,7 +5,7 @@
 //!
 //! The `cdr` crate's reader allocates and zero-fills every string or byte sequence at its
 //! *declared* length before reading it, so a 20-byte message declaring a 4 GiB `frame_id` made
-//! it allocate 4 GiB (found by fuzzing, README "Fuzzing"). This reader reads from the message
+//! it allocate 4 GiB (found by fuzzing, fuzz/README.md). This reader reads from the message
 //! slice and checks every declared length against the bytes that remain before allocating;
 //! the wire format is the same (the crate still writes fixtures).
 

@@ -669,7 +669,7 @@ pub const SUPPORTED_DEPTH_ENCODINGS: &str = "16UC1/mono16 (raw units), 32FC1 (me
     compressedDepth png or rvl (16UC1 raw units, 32FC1 inverse-depth quantised)";
 
 /// Header bytes `compressed_depth_image_transport` puts before the PNG of a 16-bit depth
-/// image (format enum + two float quantisation parameters; ecosystem.md §3.2).
+/// image (format enum + two float quantisation parameters).
 const COMPRESSED_DEPTH_HEADER_BYTES: usize = 12;
 
 fn unsupported(topic: &str, what: &str, found: &str, supported: &str) -> Error {

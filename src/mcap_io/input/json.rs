@@ -1,5 +1,5 @@
 //! Foxglove well-known messages in JSON encoding (`message_encoding = "json"`, schema encoding
-//! `jsonschema`): bytes as base64 strings, times as `{"sec", "nsec"}` (ecosystem.md §2.3).
+//! `jsonschema`): bytes as base64 strings, times as `{"sec", "nsec"}`.
 //! Missing fields take their defaults, as Foxglove's own JSON reader does.
 
 use base64::Engine as _;

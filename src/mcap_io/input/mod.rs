@@ -275,7 +275,7 @@ const MIN_RECORD_LENGTH_LIMIT_BYTES: u64 = 256 << 20;
 
 /// The longest record (or decompressed chunk) the MCAP readers accept in a file of `file_len`
 /// bytes. Without a limit the mcap readers allocate whatever length a corrupt record declares
-/// (found by fuzzing: 8e18 bytes from a 2.5 kB file, README "Fuzzing").
+/// (found by fuzzing: 8e18 bytes from a 2.5 kB file, fuzz/README.md).
 fn record_length_limit(file_len: u64) -> usize {
     usize::try_from(file_len.max(MIN_RECORD_LENGTH_LIMIT_BYTES)).unwrap_or(usize::MAX)
 }

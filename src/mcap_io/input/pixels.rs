@@ -206,10 +206,11 @@ pub fn demosaic_pixel(rows: &[&[u8]], pattern: BayerPattern, x: usize, y: usize)
     for c in 0..3 {
         rgb[c] = if c == own {
             rows[y][x]
-        } else if count[c] > 0 {
-            ((sum[c] + count[c] / 2) / count[c]) as u8
         } else {
-            rows[y][x]
+            // A 1-pixel-wide image has neighbours of only two channels: the own value then.
+            (sum[c] + count[c] / 2)
+                .checked_div(count[c])
+                .map_or(rows[y][x], |v| v as u8)
         };
     }
     rgb

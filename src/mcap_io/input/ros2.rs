@@ -1,5 +1,5 @@
 //! ROS 2 message layouts as serde structs, (de)serialised with the `cdr` crate (plain XCDR1,
-//! what rosbag2 MCAP files hold; ecosystem.md §3.2). Field order is the wire order.
+//! what rosbag2 MCAP files hold). Field order is the wire order.
 
 use serde::{Deserialize, Serialize};
 

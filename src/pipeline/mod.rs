@@ -1,9 +1,10 @@
 //! Per-sequence processing: camera motion (DVO or an external pose) + occlusion-accumulation
-//! moving-object masks, frame by frame (algorithm.md §1).
+//! moving-object masks, frame by frame (docs/method.md).
 //!
 //! A [`Processor`] owns the pose source's state (a [`DvoTracker`] or the last external pose), the
-//! [`OcclusionDetector`] and every scratch buffer, so [`Processor::process`] allocates nothing
-//! after the first frame. Frames must be given in time order.
+//! [`OcclusionDetector`] and every scratch buffer, so with external poses [`Processor::process`]
+//! allocates nothing after the first frame (`tests/detector_alloc.rs`); with DVO poses the
+//! tracker still allocates now and then. Frames must be given in time order.
 //!
 //! Pose sources ([`PoseSource`]):
 //! * [`PoseSource::DvoClosedLoop`]: the paper's loop. DVO estimates `current_from_previous` with
@@ -14,7 +15,7 @@
 //!   `world_from_camera = world_from_marker · marker_from_camera`, with the optional fixed
 //!   `camera_from_marker` calibration for markers that are not at the optical centre.
 //!
-//! # Failure modes (issue 6)
+//! # Failure modes
 //!
 //! Every frame gets a [`PoseOutcome`] and the pipeline never outputs NaN (poses, masks, the A
 //! map and statistics are finite whatever the input). Per frame, in order:
@@ -71,30 +72,38 @@
 //!         gray: &frame.gray,
 //!         depth_m: &frame.depth_m,
 //!         world_from_marker: Some(&frame.world_from_camera),
+//!         ignore_in_previous: None,
 //!     })?;
 //!     assert_eq!(output.mask.size(), config.size);
 //! }
 //! # Ok::<(), occmask::Error>(())
 //! ```
 
+pub mod offline;
+
 use std::time::Instant;
 
 use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
 
+use crate::dvo::completion::{IgnoreCompletion, IgnoreCompletionConfig};
 use crate::dvo::{DvoConfig, DvoFailure, DvoStatus, DvoTracker, MAX_DVO_LEVELS};
 use crate::error::{Error, Result};
 use crate::geometry::se3::{is_finite_pose, rotation_angle_rad};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use crate::occlusion::{OcclusionConfig, OcclusionDetector, OcclusionStats};
+use offline::OfflineConfig;
 
 /// Where the camera motion comes from.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum PoseSource {
-    /// DVO with the previous mask as its ignore mask (the paper's closed loop).
-    DvoClosedLoop(DvoConfig),
+    /// DVO ([`ProcessorConfig::dvo`]) with the previous mask as its ignore mask (the paper's
+    /// closed loop).
+    #[default]
+    DvoClosedLoop,
     /// DVO without mask feedback.
-    DvoUnmasked(DvoConfig),
+    DvoUnmasked,
     /// An external `world_from_marker` pose given with every frame.
     External {
         /// Fixed pose of the marker in the camera frame (`None` = the marker is the camera).
@@ -141,7 +150,8 @@ const COST_HISTORY: usize = 15;
 const MIN_COST_HISTORY: usize = 5;
 
 /// What the pipeline does when a frame's motion cannot be trusted (see the module docs).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct FailurePolicy {
     /// Frames with less valid depth than this fraction are skipped as a blackout.
     pub min_valid_depth_fraction: f64,
@@ -230,24 +240,85 @@ impl FailurePolicy {
 }
 
 /// Configuration of a [`Processor`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+///
+/// Serialised (the `--config` JSON file of `occmask process`) as `{"dvo": …, "occlusion": …,
+/// "failure": …}`, each field by field; missing fields take the default, unknown ones are an
+/// error. The pose source is not part of the file: it comes from the caller (`--pose`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ProcessorConfig {
+    /// Pose source (not serialised).
+    #[serde(skip)]
+    pub pose_source: PoseSource,
+    /// DVO parameters (used by the DVO pose sources).
+    pub dvo: DvoConfig,
     /// Detector parameters.
     pub occlusion: OcclusionConfig,
-    /// Pose source.
-    pub pose_source: PoseSource,
     /// Failure handling.
     pub failure: FailurePolicy,
+    /// Depth-connected completion of DVO's ignore mask (the closed loop's previous mask grown
+    /// over the rest of each object's depth-continuous surface, see
+    /// [`crate::dvo::completion`]); `None` = the detector's mask as it is (the paper).
+    pub ignore_completion: Option<IgnoreCompletionConfig>,
+    /// Causal or offline processing (chooses between [`Processor`] and
+    /// [`offline::OfflineProcessor`] where a caller offers both, as `occmask process` does).
+    pub mode: ProcessingMode,
+    /// The offline mode's parameters ([`offline::OfflineProcessor`]; unused by [`Processor`]).
+    pub offline: OfflineConfig,
+}
+
+/// How a recording is processed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProcessingMode {
+    /// Forward, backward and refinement passes with a bounded look-ahead
+    /// ([`offline::OfflineProcessor`]): the default for recordings.
+    #[default]
+    Offline,
+    /// One forward pass, each frame's result from it and the frames before ([`Processor`]):
+    /// what an online user gets.
+    Causal,
+}
+
+impl ProcessingMode {
+    /// `offline` or `causal`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ProcessingMode::Offline => "offline",
+            ProcessingMode::Causal => "causal",
+        }
+    }
 }
 
 impl Default for ProcessorConfig {
-    /// The paper's closed loop with default DVO and detector parameters.
+    /// The closed loop with [`DvoConfig::closed_loop`], the default detector, failure policy and
+    /// ignore-mask completion.
     fn default() -> Self {
         Self {
+            pose_source: PoseSource::default(),
+            dvo: DvoConfig::closed_loop(),
             occlusion: OcclusionConfig::default(),
-            pose_source: PoseSource::DvoClosedLoop(DvoConfig::default()),
             failure: FailurePolicy::default(),
+            ignore_completion: Some(IgnoreCompletionConfig::default()),
+            mode: ProcessingMode::default(),
+            offline: OfflineConfig::default(),
         }
+    }
+}
+
+impl ProcessorConfig {
+    /// Checks the DVO, detector, failure-policy and completion parameters.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the first bad field.
+    pub fn validate(&self) -> Result<()> {
+        self.dvo.validate()?;
+        self.occlusion.validate()?;
+        if let Some(completion) = &self.ignore_completion {
+            completion.validate()?;
+        }
+        self.offline.validate()?;
+        self.failure.validate()
     }
 }
 
@@ -262,6 +333,11 @@ pub struct FrameInput<'a> {
     pub depth_m: &'a DepthMeters,
     /// External pose of this frame; required by [`PoseSource::External`], ignored otherwise.
     pub world_from_marker: Option<&'a Isometry3<f64>>,
+    /// Moving pixels of the previous frame known from elsewhere (the offline mode's look-ahead
+    /// masks, [`offline`]): the closed loop's DVO ignores them as well as the detector's own
+    /// mask. Ignored by the other pose sources and when DVO's reference is not the previous
+    /// frame (frames skipped in between).
+    pub ignore_in_previous: Option<&'a Mask>,
 }
 
 /// DVO's report for one frame.
@@ -481,10 +557,69 @@ pub struct Processor {
     recent_cost_count: usize,
     empty_mask: Mask,
     zero_accumulation_m: DepthMeters,
+    /// DVO's ignore mask: the detector's mask (and the caller's) and their completion.
+    ignore: IgnoreMask,
+}
+
+/// The closed loop's ignore mask and its completion state.
+struct IgnoreMask {
+    completion: Option<IgnoreCompletion>,
+    /// The union of the detector's and the caller's masks.
+    union: Mask,
+    /// Its completion.
+    completed: Mask,
+}
+
+impl IgnoreMask {
+    /// The ignore mask for DVO from the detector's mask, the caller's extra mask and the
+    /// reference frame's depth.
+    fn build<'a>(
+        &'a mut self,
+        detector_mask: &'a Mask,
+        extra: Option<&Mask>,
+        depth_m: &DepthMeters,
+    ) -> Result<&'a Mask> {
+        let base = match extra {
+            Some(extra) => {
+                for ((u, &d), &e) in self
+                    .union
+                    .as_mut_slice()
+                    .iter_mut()
+                    .zip(detector_mask.as_slice())
+                    .zip(extra.as_slice())
+                {
+                    *u = d | e;
+                }
+                &self.union
+            }
+            None => detector_mask,
+        };
+        match &mut self.completion {
+            Some(completion) => {
+                completion.complete(base, depth_m, &mut self.completed)?;
+                Ok(&self.completed)
+            }
+            None if extra.is_some() => Ok(&self.union),
+            None => Ok(detector_mask),
+        }
+    }
+}
+
+/// [`Error::SizeMismatch`] unless `found` is `expected`.
+pub(crate) fn check_size(what: &str, found: ImageSize, expected: ImageSize) -> Result<()> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(Error::SizeMismatch {
+            what: format!("pipeline {what}"),
+            expected,
+            found,
+        })
+    }
 }
 
 /// Fraction of pixels with finite positive depth.
-fn valid_depth_fraction(depth_m: &DepthMeters) -> f64 {
+pub(crate) fn valid_depth_fraction(depth_m: &DepthMeters) -> f64 {
     let valid = depth_m
         .as_slice()
         .iter()
@@ -514,9 +649,9 @@ impl Processor {
         config.failure.validate()?;
         let detector = OcclusionDetector::new(size, intrinsics, config.occlusion)?;
         let source = match config.pose_source {
-            PoseSource::DvoClosedLoop(dvo) | PoseSource::DvoUnmasked(dvo) => MotionSource::Dvo {
-                tracker: Box::new(DvoTracker::new(size, intrinsics, dvo)?),
-                closed_loop: matches!(config.pose_source, PoseSource::DvoClosedLoop(_)),
+            PoseSource::DvoClosedLoop | PoseSource::DvoUnmasked => MotionSource::Dvo {
+                tracker: Box::new(DvoTracker::new(size, intrinsics, config.dvo)?),
+                closed_loop: config.pose_source == PoseSource::DvoClosedLoop,
             },
             PoseSource::External { camera_from_marker } => MotionSource::External {
                 marker_from_camera: camera_from_marker.map_or_else(Isometry3::identity, |c| c.inverse()),
@@ -539,6 +674,14 @@ impl Processor {
             recent_cost_count: 0,
             empty_mask: Mask::filled(size, 0),
             zero_accumulation_m: DepthMeters::filled(size, 0.0),
+            ignore: IgnoreMask {
+                completion: config
+                    .ignore_completion
+                    .map(|c| IgnoreCompletion::new(size, c))
+                    .transpose()?,
+                union: Mask::filled(size, 0),
+                completed: Mask::filled(size, 0),
+            },
         })
     }
 
@@ -645,18 +788,8 @@ impl Processor {
     pub fn process(&mut self, frame: &FrameInput<'_>) -> Result<FrameOutput<'_>> {
         let started = Instant::now();
         let size = self.detector.size();
-        for (what, found) in [
-            ("gray image", frame.gray.size()),
-            ("depth image", frame.depth_m.size()),
-        ] {
-            if found != size {
-                return Err(Error::SizeMismatch {
-                    what: format!("pipeline {what}"),
-                    expected: size,
-                    found,
-                });
-            }
-        }
+        check_size("gray image", frame.gray.size(), size)?;
+        check_size("depth image", frame.depth_m.size(), size)?;
         let mut stats = FrameStats {
             valid_depth_fraction: valid_depth_fraction(frame.depth_m),
             ..FrameStats::default()
@@ -712,7 +845,18 @@ impl Processor {
                 // DVO's ignore mask must live on its reference frame: the detector's latest
                 // mask is that frame's only when the detector saw the same frame last.
                 let mask_on_reference = self.detector.frames_processed() > 0 && self.dvo_skipped == 0;
-                let ignore = (*closed_loop && mask_on_reference).then(|| self.detector.mask());
+                let ignore = if *closed_loop && mask_on_reference {
+                    if let Some(extra) = frame.ignore_in_previous {
+                        check_size("ignore_in_previous", extra.size(), size)?;
+                    }
+                    Some(self.ignore.build(
+                        self.detector.mask(),
+                        frame.ignore_in_previous,
+                        self.detector.compensated_depth_m(),
+                    )?)
+                } else {
+                    None
+                };
                 let estimate = tracker.track(frame.gray, frame.depth_m, ignore, None)?;
                 match estimate {
                     None => {

@@ -1,0 +1,372 @@
+//! Depth-connected completion of an ignore mask.
+//!
+//! The detector often marks only part of a moving person (a band along the edge that swept
+//! over the background, the legs). DVO must not see the rest of the body either: its residuals
+//! move with the person and pull the estimate along. The completion grows every connected
+//! component of the mask breadth-first over 4-neighbours whose depth is continuous with the
+//! pixel they grow from (|Z(n) − Z(f)| < `max_depth_step_fraction` · Z(f)) and stays within
+//! `max_depth_band_m` of the component's median depth. Continuity stops the growth at depth
+//! edges (the wall behind a person); the band stops it on surfaces that are continuous with
+//! the object but extend far in depth (the floor a person stands on, a desk a box slides on)
+//! after at most a band's worth of them. For an ignore mask the cost of taking too much is a
+//! few lost background pixels; the cost of taking too little is a biased motion.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET};
+
+/// Parameters of [`IgnoreCompletion`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IgnoreCompletionConfig {
+    /// Largest depth step between neighbours, as a fraction of the depth grown from.
+    pub max_depth_step_fraction: f32,
+    /// Largest distance from the component's median depth, metres.
+    pub max_depth_band_m: f32,
+}
+
+impl Default for IgnoreCompletionConfig {
+    fn default() -> Self {
+        Self {
+            max_depth_step_fraction: DEFAULT_MAX_DEPTH_STEP_FRACTION,
+            max_depth_band_m: DEFAULT_MAX_DEPTH_BAND_M,
+        }
+    }
+}
+
+/// Default [`IgnoreCompletionConfig::max_depth_step_fraction`]: 3 % of Z, about four times the
+/// Kinect's depth step between neighbouring pixels on a slanted surface at 3 m (quantisation
+/// and noise), well below the step from a person to the wall behind them.
+pub const DEFAULT_MAX_DEPTH_STEP_FRACTION: f32 = 0.03;
+/// Default [`IgnoreCompletionConfig::max_depth_band_m`]: 0.5 m around the median depth, the
+/// depth extent of a person seen from any side (measured on the Bonn "crowd" window, see
+/// docs/method.md: 0.3 m loses arms held forward, 1 m takes in metres of floor).
+pub const DEFAULT_MAX_DEPTH_BAND_M: f32 = 0.5;
+
+impl IgnoreCompletionConfig {
+    /// Checks both fields.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the bad field.
+    pub fn validate(&self) -> Result<()> {
+        for (name, value) in [
+            (
+                "ignore_completion.max_depth_step_fraction",
+                self.max_depth_step_fraction,
+            ),
+            ("ignore_completion.max_depth_band_m", self.max_depth_band_m),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(Error::InvalidParameter {
+                    name,
+                    value: value.to_string(),
+                    expected: "finite and > 0".into(),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The completion runs on a grid of 2×2-pixel cells (mask: any child set; depth: the nearest
+/// valid child): four times fewer pixels to visit, and DVO pools the mask to its finest level
+/// (half resolution by default) and dilates it by 4 px anyway.
+const CELL_PX: usize = 2;
+
+/// Preallocated state of the completion for images of one size.
+#[derive(Debug, Clone)]
+pub struct IgnoreCompletion {
+    config: IgnoreCompletionConfig,
+    size: ImageSize,
+    /// The cell grid's size.
+    cells: ImageSize,
+    /// Per cell: set (the mask, then the completion).
+    set: Vec<bool>,
+    /// Per cell: the nearest valid depth of its pixels (0 = none).
+    depth_m: Vec<f32>,
+    /// Component of every set cell (`UNLABELLED` elsewhere).
+    labels: Vec<u32>,
+    /// Median depth of each component (0 when it has no valid depth).
+    medians: Vec<f32>,
+    /// Depths of the component being labelled (for its median).
+    depths: Vec<f32>,
+    /// Breadth-first queue of cell indices.
+    queue: Vec<u32>,
+}
+
+const UNLABELLED: u32 = u32::MAX;
+
+impl IgnoreCompletion {
+    /// State for `size` images.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for a bad config.
+    pub fn new(size: ImageSize, config: IgnoreCompletionConfig) -> Result<Self> {
+        config.validate()?;
+        let cells = ImageSize::new(size.width.div_ceil(CELL_PX), size.height.div_ceil(CELL_PX));
+        Ok(Self {
+            config,
+            size,
+            cells,
+            set: vec![false; cells.area()],
+            depth_m: vec![0.0; cells.area()],
+            labels: vec![UNLABELLED; cells.area()],
+            medians: Vec::new(),
+            depths: Vec::with_capacity(cells.area()),
+            queue: Vec::with_capacity(cells.area()),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &IgnoreCompletionConfig {
+        &self.config
+    }
+
+    /// Writes the completion of `mask` on `depth_m` into `out` (0 / [`MASK_SET`]): every 2×2
+    /// cell that holds a mask pixel or that the growth reached. Returns the cells added.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when an image is not the completion's size.
+    pub fn complete(&mut self, mask: &Mask, depth_m: &DepthMeters, out: &mut Mask) -> Result<usize> {
+        for (what, found) in [
+            ("ignore completion mask", mask.size()),
+            ("ignore completion depth", depth_m.size()),
+            ("ignore completion output", out.size()),
+        ] {
+            if found != self.size {
+                return Err(Error::SizeMismatch {
+                    what: what.into(),
+                    expected: self.size,
+                    found,
+                });
+            }
+        }
+        self.pool(mask, depth_m);
+        self.label_components();
+        let added = self.grow();
+        // Every set cell (the mask's cells and those the growth added).
+        let (w, cw) = (self.size.width, self.cells.width);
+        for (y, out_row) in out.as_mut_slice().chunks_exact_mut(w).enumerate() {
+            let cell_row = &self.set[(y / CELL_PX) * cw..(y / CELL_PX + 1) * cw];
+            for (x, o) in out_row.iter_mut().enumerate() {
+                *o = if cell_row[x / CELL_PX] { MASK_SET } else { 0 };
+            }
+        }
+        Ok(added)
+    }
+
+    /// The cell grid of `mask` and `depth_m`.
+    fn pool(&mut self, mask: &Mask, depth_m: &DepthMeters) {
+        self.set.fill(false);
+        self.depth_m.fill(0.0);
+        let (w, cw) = (self.size.width, self.cells.width);
+        for (y, (mask_row, depth_row)) in mask
+            .as_slice()
+            .chunks_exact(w)
+            .zip(depth_m.as_slice().chunks_exact(w))
+            .enumerate()
+        {
+            let row = (y / CELL_PX) * cw;
+            for (x, (&m, &z)) in mask_row.iter().zip(depth_row).enumerate() {
+                let c = row + x / CELL_PX;
+                self.set[c] |= m != 0;
+                let d = &mut self.depth_m[c];
+                if z > 0.0 && (*d == 0.0 || z < *d) {
+                    *d = z;
+                }
+            }
+        }
+    }
+
+    /// 4-connected components of the set cells and their median depths.
+    fn label_components(&mut self) {
+        let (w, h) = (self.cells.width, self.cells.height);
+        self.labels.fill(UNLABELLED);
+        self.medians.clear();
+        for start in 0..self.set.len() {
+            if !self.set[start] || self.labels[start] != UNLABELLED {
+                continue;
+            }
+            let label = self.medians.len() as u32;
+            self.depths.clear();
+            self.queue.clear();
+            self.queue.push(start as u32);
+            self.labels[start] = label;
+            let mut head = 0;
+            while head < self.queue.len() {
+                let i = self.queue[head] as usize;
+                head += 1;
+                if self.depth_m[i] > 0.0 {
+                    self.depths.push(self.depth_m[i]);
+                }
+                let (x, y) = (i % w, i / w);
+                for (j, inside) in [
+                    (i.wrapping_sub(1), x > 0),
+                    (i + 1, x + 1 < w),
+                    (i.wrapping_sub(w), y > 0),
+                    (i + w, y + 1 < h),
+                ] {
+                    if inside && self.set[j] && self.labels[j] == UNLABELLED {
+                        self.labels[j] = label;
+                        self.queue.push(j as u32);
+                    }
+                }
+            }
+            let median = if self.depths.is_empty() {
+                0.0
+            } else {
+                let mid = self.depths.len() / 2;
+                *self.depths.select_nth_unstable_by(mid, f32::total_cmp).1
+            };
+            self.medians.push(median);
+        }
+    }
+
+    /// Breadth-first growth from every set cell with depth; returns the cells added.
+    fn grow(&mut self) -> usize {
+        let (w, h) = (self.cells.width, self.cells.height);
+        let (set, depth) = (&mut self.set, &self.depth_m);
+        self.queue.clear();
+        self.queue.extend(
+            (0..set.len())
+                .filter(|&i| set[i] && depth[i] > 0.0)
+                .map(|i| i as u32),
+        );
+        let (step, band) = (self.config.max_depth_step_fraction, self.config.max_depth_band_m);
+        let mut added = 0;
+        let mut head = 0;
+        while head < self.queue.len() {
+            let i = self.queue[head] as usize;
+            head += 1;
+            let label = self.labels[i];
+            let median = self.medians[label as usize];
+            let z = depth[i];
+            let (x, y) = (i % w, i / w);
+            for (j, inside) in [
+                (i.wrapping_sub(1), x > 0),
+                (i + 1, x + 1 < w),
+                (i.wrapping_sub(w), y > 0),
+                (i + w, y + 1 < h),
+            ] {
+                if !inside || set[j] {
+                    continue;
+                }
+                let zj = depth[j];
+                if zj > 0.0 && (zj - z).abs() < step * z && (zj - median).abs() < band {
+                    set[j] = true;
+                    self.labels[j] = label;
+                    self.queue.push(j as u32);
+                    added += 1;
+                }
+            }
+        }
+        added
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A wall at 3.2 m, a floor from the wall (3.2 m at row 30) to the bottom edge (2.2 m at row
+    /// 63), and a box (x 20..40, y 10..45) at 2.75 m standing on the floor (the floor is at
+    /// 2.745 m just below it, so box and floor are depth-continuous).
+    fn scene() -> (ImageSize, DepthMeters) {
+        let size = ImageSize::new(64, 64);
+        let depth = DepthMeters::from_fn(size, |x, y| {
+            if (20..40).contains(&x) && (10..45).contains(&y) {
+                2.75
+            } else if y >= 30 {
+                3.2 - (y - 30) as f32 / 33.0
+            } else {
+                3.2
+            }
+        });
+        (size, depth)
+    }
+
+    /// A band of 0.3 m keeps the wall (0.45 m behind the box) out.
+    const CONFIG: IgnoreCompletionConfig = IgnoreCompletionConfig {
+        max_depth_step_fraction: DEFAULT_MAX_DEPTH_STEP_FRACTION,
+        max_depth_band_m: 0.3,
+    };
+
+    #[test]
+    fn fills_the_object_and_stops_at_depth_edges_and_the_band() {
+        let (size, depth) = scene();
+        let mut completion = IgnoreCompletion::new(size, CONFIG).unwrap();
+        // Only a strip of the box's left edge is detected.
+        let mask = Mask::from_fn(size, |x, y| {
+            if (20..23).contains(&x) && (12..20).contains(&y) {
+                MASK_SET
+            } else {
+                0
+            }
+        });
+        let mut out = Mask::filled(size, 0);
+        let added = completion.complete(&mask, &depth, &mut out).unwrap();
+        let on_box = |x: usize, y: usize| (20..40).contains(&x) && (10..45).contains(&y);
+        for y in 0..64 {
+            for x in 0..64 {
+                let z = depth.get(x, y);
+                if on_box(x, y) {
+                    assert_eq!(out.get(x, y), MASK_SET, "box pixel ({x}, {y}) not completed");
+                } else if (z - 2.75).abs() >= 0.3 + 0.06 {
+                    // The wall and the floor beyond the band (plus one cell's depth change on
+                    // the floor) stay out.
+                    assert_eq!(out.get(x, y), 0, "({x}, {y}) at {z} m leaked into");
+                }
+            }
+        }
+        // In 2×2 cells: the box is 10 × 17.5 cells, the seed strip 1.5 × 4.
+        assert!(added >= 10 * 17 - 2 * 4, "{added} cells");
+        // The floor at the box's foot is continuous and within the band: taken (but only up to
+        // 0.3 m from the box's depth, checked above).
+        assert_eq!(out.get(30, 50), MASK_SET);
+    }
+
+    #[test]
+    fn an_empty_mask_stays_empty_and_cells_without_depth_do_not_grow() {
+        let (size, mut depth) = scene();
+        let mut completion = IgnoreCompletion::new(size, CONFIG).unwrap();
+        let mut out = Mask::filled(size, MASK_SET);
+        assert_eq!(
+            completion
+                .complete(&Mask::filled(size, 0), &depth, &mut out)
+                .unwrap(),
+            0
+        );
+        assert!(out.as_slice().iter().all(|&m| m == 0));
+        // A mask pixel in a cell without depth is kept (its cell) but grows nothing.
+        for (x, y) in [(4, 4), (5, 4), (4, 5), (5, 5)] {
+            depth.set(x, y, 0.0);
+        }
+        let mask = Mask::from_fn(size, |x, y| if (x, y) == (5, 5) { MASK_SET } else { 0 });
+        assert_eq!(completion.complete(&mask, &depth, &mut out).unwrap(), 0);
+        assert_eq!(out.get(5, 5), MASK_SET);
+        assert_eq!(out.as_slice().iter().filter(|&&m| m != 0).count(), 4);
+    }
+
+    #[test]
+    fn sizes_and_parameters_are_checked() {
+        let (size, depth) = scene();
+        let bad = IgnoreCompletionConfig {
+            max_depth_band_m: f32::NAN,
+            ..IgnoreCompletionConfig::default()
+        };
+        assert!(matches!(
+            IgnoreCompletion::new(size, bad),
+            Err(Error::InvalidParameter {
+                name: "ignore_completion.max_depth_band_m",
+                ..
+            })
+        ));
+        let mut completion = IgnoreCompletion::new(size, IgnoreCompletionConfig::default()).unwrap();
+        let mut out = Mask::filled(ImageSize::new(8, 8), 0);
+        assert!(matches!(
+            completion.complete(&Mask::filled(size, 0), &depth, &mut out),
+            Err(Error::SizeMismatch { .. })
+        ));
+    }
+}

@@ -1,0 +1,432 @@
+//! Offline processing of a recorded sequence: the causal pipeline ([`Processor`]) runs once
+//! forward, the detector then runs backward in time over the same poses, and a second forward
+//! pass refines the motion with both passes' masks.
+//!
+//! Occlusion accumulation only sees an object where it moves in front of something farther
+//! away, so a causal detector finds an object late (an object in view from the first frame,
+//! one that rests and then starts to move) and only at its leading edge. Run backward in time,
+//! the same detector sees every object's *trailing* edge and its past: what it marks is where
+//! the object will have been. For a recording both directions are available, and their union
+//! covers objects from the first frame on and over more of their surface. With those masks the
+//! closed loop's DVO ignores most of every moving object, which is what keeps the odometry
+//! from following people who fill half the view (docs/method.md has the measurements).
+//!
+//! Passes, per block of [`OfflineConfig::block_frames`] frames with
+//! [`OfflineConfig::lookahead_frames`] more frames buffered beyond it:
+//! 1. **first pass** (as frames arrive): the causal pipeline, for the closed loop with DVO on a
+//!    coarser finest level ([`OfflineConfig::first_pass_finest_level`]: its poses only seed the
+//!    masks); the DVO baseline runs as it is; external poses need no first pass;
+//! 2. **backward pass** (once the look-ahead is buffered): a fresh detector from the last
+//!    buffered frame back to the block's first, with the first pass's poses;
+//! 3. **refinement pass** (the block's frames in order): the pipeline again, for the closed loop
+//!    with [`OfflineConfig::refinement_dvo`] ignoring the first pass's forward and backward masks
+//!    of each frame's predecessor as well as its own; otherwise with the first pass's (or the
+//!    external) poses. A frame's mask is the refinement pass's ∪ the backward pass's.
+//!
+//! Frames are emitted in order, a block at a time, so results lag the input by up to
+//! `block_frames + lookahead_frames` frames, and that many frames are buffered (gray as u16,
+//! depth as f32, two masks: 2.4 MB per 640×480 frame). Buffers are recycled: after the first
+//! block nothing is allocated per frame.
+
+use std::collections::VecDeque;
+
+use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
+
+use super::{
+    check_size, valid_depth_fraction, FrameInput, FrameOutput, PoseSource, Processor, ProcessorConfig,
+};
+use crate::dvo::{DvoConfig, MotionPriorConfig};
+use crate::error::{Error, Result};
+use crate::geometry::se3::is_finite_pose;
+use crate::geometry::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
+use crate::occlusion::OcclusionDetector;
+
+/// Parameters of the offline mode ([`OfflineProcessor`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OfflineConfig {
+    /// Frames finished together (≥ 1).
+    pub block_frames: usize,
+    /// Frames beyond a block that the backward pass starts from: how far ahead it looks (an
+    /// object resting at the block's end is found if it moves within this many frames).
+    pub lookahead_frames: usize,
+    /// The closed loop's first pass runs DVO down to this pyramid level only (0 = full
+    /// resolution; never finer than the configured DVO's own finest level, never coarser than
+    /// its coarsest).
+    pub first_pass_finest_level: usize,
+    /// DVO of the closed loop's refinement pass.
+    pub refinement_dvo: DvoConfig,
+}
+
+/// Default [`OfflineConfig::block_frames`]: 2 s at 30 Hz.
+pub const DEFAULT_BLOCK_FRAMES: usize = 60;
+/// Default [`OfflineConfig::lookahead_frames`]: 1 s at 30 Hz.
+pub const DEFAULT_LOOKAHEAD_FRAMES: usize = 30;
+/// Default [`OfflineConfig::first_pass_finest_level`]: 160×120 for VGA, a quarter of the
+/// closed loop's finest level's pixels.
+pub const DEFAULT_FIRST_PASS_FINEST_LEVEL: usize = 2;
+
+impl Default for OfflineConfig {
+    /// The refinement pass uses the paper's DVO weights with the motion prior: once the moving
+    /// objects are masked, the photometric term is the more accurate one.
+    fn default() -> Self {
+        Self {
+            block_frames: DEFAULT_BLOCK_FRAMES,
+            lookahead_frames: DEFAULT_LOOKAHEAD_FRAMES,
+            first_pass_finest_level: DEFAULT_FIRST_PASS_FINEST_LEVEL,
+            refinement_dvo: DvoConfig {
+                motion_prior: Some(MotionPriorConfig::default()),
+                ..DvoConfig::paper()
+            },
+        }
+    }
+}
+
+impl OfflineConfig {
+    /// Checks every field.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the first bad field.
+    pub fn validate(&self) -> Result<()> {
+        if self.block_frames == 0 {
+            return Err(Error::InvalidParameter {
+                name: "offline.block_frames",
+                value: "0".into(),
+                expected: "at least 1".into(),
+            });
+        }
+        self.refinement_dvo.validate()
+    }
+}
+
+/// A frame waiting for its backward and refinement passes.
+#[derive(Debug, Clone)]
+struct Buffered {
+    timestamp_ns: u64,
+    /// Gray in units of 1/65535 (the refinement pass's input, to within 1e-5).
+    gray: Image<u16>,
+    depth_m: DepthMeters,
+    world_from_marker: Option<Isometry3<f64>>,
+    /// The first pass's camera pose (or the external camera pose).
+    world_from_camera: Isometry3<f64>,
+    /// The first pass's mask (closed loop only; empty otherwise).
+    first_mask: Mask,
+    /// The first pass discarded its detector's state at this frame (a jump from the previous).
+    first_reset: bool,
+    /// Enough valid depth for the detector (not a blackout).
+    has_depth: bool,
+    /// The backward pass's mask.
+    backward_mask: Mask,
+}
+
+/// Sequence processor of the offline mode (see the module docs).
+pub struct OfflineProcessor {
+    config: OfflineConfig,
+    source: PoseSource,
+    /// External poses: the marker's pose in the camera.
+    marker_from_camera: Isometry3<f64>,
+    min_valid_depth_fraction: f64,
+    appearance_growth: bool,
+    /// Pass 1 (`None` with external poses).
+    first: Option<Processor>,
+    /// Pass 2.
+    backward: OcclusionDetector,
+    /// Pass 3.
+    refine: Processor,
+    buffer: VecDeque<Buffered>,
+    spare: Vec<Buffered>,
+    size: ImageSize,
+    /// Scratch: a buffered frame's gray as f32.
+    gray: GrayF32,
+    /// The emitted mask (refinement ∪ backward).
+    mask: Mask,
+    /// The first pass's forward ∪ backward mask of the last emitted frame (the next frame's
+    /// `ignore_in_previous` in the closed loop's refinement pass).
+    previous_seed_mask: Mask,
+    has_previous_seed_mask: bool,
+}
+
+impl OfflineProcessor {
+    /// An offline processor for `size` frames seen through `intrinsics`, with `config`'s pose
+    /// source, DVO, detector, failure policy and [`ProcessorConfig::offline`] parameters.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for invalid parameters, intrinsics or size.
+    pub fn new(size: ImageSize, intrinsics: PinholeIntrinsics, config: ProcessorConfig) -> Result<Self> {
+        config.validate()?;
+        let offline = config.offline;
+        let first = match config.pose_source {
+            PoseSource::DvoClosedLoop => {
+                let coarsest = config.dvo.levels_for(size).saturating_sub(1);
+                let finest = offline
+                    .first_pass_finest_level
+                    .min(coarsest)
+                    .max(config.dvo.finest_level);
+                let dvo = DvoConfig {
+                    finest_level: finest,
+                    ..config.dvo
+                };
+                Some(Processor::new(
+                    size,
+                    intrinsics,
+                    ProcessorConfig { dvo, ..config },
+                )?)
+            }
+            PoseSource::DvoUnmasked => Some(Processor::new(size, intrinsics, config)?),
+            PoseSource::External { .. } => None,
+        };
+        let refine = match config.pose_source {
+            PoseSource::DvoClosedLoop => ProcessorConfig {
+                dvo: offline.refinement_dvo,
+                ..config
+            },
+            // The DVO baseline's poses (camera poses) and external poses are replayed.
+            PoseSource::DvoUnmasked => ProcessorConfig {
+                pose_source: PoseSource::External {
+                    camera_from_marker: None,
+                },
+                ..config
+            },
+            PoseSource::External { .. } => config,
+        };
+        let marker_from_camera = match config.pose_source {
+            PoseSource::External {
+                camera_from_marker: Some(c),
+            } => c.inverse(),
+            _ => Isometry3::identity(),
+        };
+        Ok(Self {
+            config: offline,
+            source: config.pose_source,
+            marker_from_camera,
+            min_valid_depth_fraction: config.failure.min_valid_depth_fraction,
+            appearance_growth: config.occlusion.appearance_growth.is_some(),
+            first,
+            backward: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
+            refine: Processor::new(size, intrinsics, refine)?,
+            buffer: VecDeque::new(),
+            spare: Vec::new(),
+            size,
+            gray: GrayF32::filled(size, 0.0),
+            mask: Mask::filled(size, 0),
+            previous_seed_mask: Mask::filled(size, 0),
+            has_previous_seed_mask: false,
+        })
+    }
+
+    /// Frames pushed but not yet emitted.
+    pub fn pending_frames(&self) -> usize {
+        self.buffer.len()
+    }
+
+    /// Adds the next frame (frames in time order). Calls `emit` for every frame whose result
+    /// is final now, in order: none until a block and its look-ahead are buffered, then a
+    /// block's worth.
+    ///
+    /// # Errors
+    /// As [`Processor::process`], and whatever `emit` returns.
+    pub fn push(
+        &mut self,
+        frame: &FrameInput<'_>,
+        emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>,
+    ) -> Result<()> {
+        check_size("gray image", frame.gray.size(), self.size)?;
+        check_size("depth image", frame.depth_m.size(), self.size)?;
+        let mut buffered = self.spare.pop().unwrap_or_else(|| Buffered {
+            timestamp_ns: 0,
+            gray: Image::filled(self.size, 0),
+            depth_m: DepthMeters::filled(self.size, 0.0),
+            world_from_marker: None,
+            world_from_camera: Isometry3::identity(),
+            first_mask: Mask::filled(self.size, 0),
+            first_reset: false,
+            has_depth: false,
+            backward_mask: Mask::filled(self.size, 0),
+        });
+        buffered.timestamp_ns = frame.timestamp_ns;
+        for (q, &g) in buffered.gray.as_mut_slice().iter_mut().zip(frame.gray.as_slice()) {
+            *q = quantize_gray(g);
+        }
+        buffered
+            .depth_m
+            .as_mut_slice()
+            .copy_from_slice(frame.depth_m.as_slice());
+        buffered.world_from_marker = frame.world_from_marker.copied();
+        buffered.has_depth = valid_depth_fraction(frame.depth_m) >= self.min_valid_depth_fraction;
+        match &mut self.first {
+            Some(first) => {
+                let out = first.process(&FrameInput {
+                    ignore_in_previous: None,
+                    ..*frame
+                })?;
+                buffered.world_from_camera = out.world_from_camera;
+                buffered.first_reset = out.stats.detector_reset;
+                if self.source == PoseSource::DvoClosedLoop {
+                    buffered
+                        .first_mask
+                        .as_mut_slice()
+                        .copy_from_slice(out.mask.as_slice());
+                }
+            }
+            None => {
+                let marker = frame.world_from_marker.ok_or_else(|| Error::InvalidParameter {
+                    name: "world_from_marker",
+                    value: format!("missing at t = {} ns", frame.timestamp_ns),
+                    expected: "an external pose for every frame with PoseSource::External".into(),
+                })?;
+                if !is_finite_pose(marker) {
+                    return Err(Error::InvalidParameter {
+                        name: "world_from_marker",
+                        value: format!("{marker:?}"),
+                        expected: "a finite pose".into(),
+                    });
+                }
+                buffered.world_from_camera = marker * self.marker_from_camera;
+                buffered.first_reset = false;
+            }
+        }
+        self.buffer.push_back(buffered);
+        if self.buffer.len() >= self.config.block_frames + self.config.lookahead_frames {
+            self.finish_block(self.config.block_frames, emit)?;
+        }
+        Ok(())
+    }
+
+    /// Finishes every buffered frame (the end of the sequence), calling `emit` for each.
+    ///
+    /// # Errors
+    /// As [`Self::push`].
+    pub fn finish(&mut self, emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>) -> Result<()> {
+        while !self.buffer.is_empty() {
+            let n = self.config.block_frames.min(self.buffer.len());
+            self.finish_block(n, emit)?;
+        }
+        Ok(())
+    }
+
+    /// The backward pass over everything buffered, then the refinement pass and `emit` for the
+    /// first `n` frames, which are then recycled.
+    fn finish_block(&mut self, n: usize, emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>) -> Result<()> {
+        self.backward_pass(n)?;
+        for _ in 0..n {
+            let Some(frame) = self.buffer.pop_front() else {
+                break;
+            };
+            let result = self.refine_and_emit(&frame, emit);
+            self.spare.push(frame);
+            result?;
+        }
+        Ok(())
+    }
+
+    /// Pass 2: a fresh detector from the last buffered frame back to the first; the masks of
+    /// the first `n` frames are kept.
+    fn backward_pass(&mut self, n: usize) -> Result<()> {
+        self.backward.reset();
+        // The pose of the detector's previous frame (the later one in time).
+        let mut reference: Option<Isometry3<f64>> = None;
+        for j in (0..self.buffer.len()).rev() {
+            // A jump between frames j and j + 1 (the first pass reset its detector at j + 1)
+            // is the same jump backwards.
+            if self.buffer.get(j + 1).is_some_and(|later| later.first_reset) {
+                self.backward.reset();
+                reference = None;
+            }
+            let frame = &mut self.buffer[j];
+            if !frame.has_depth {
+                frame.backward_mask.fill(0);
+                continue;
+            }
+            let current_from_previous = reference.map_or_else(Isometry3::identity, |previous| {
+                frame.world_from_camera.inverse() * previous
+            });
+            let gray = if self.appearance_growth {
+                dequantize_gray_into(&frame.gray, &mut self.gray);
+                Some(&self.gray)
+            } else {
+                None
+            };
+            let mask = self
+                .backward
+                .update_with_gray(&frame.depth_m, gray, &current_from_previous)?;
+            if j < n {
+                frame
+                    .backward_mask
+                    .as_mut_slice()
+                    .copy_from_slice(mask.as_slice());
+            }
+            reference = Some(frame.world_from_camera);
+        }
+        Ok(())
+    }
+
+    /// Pass 3 for one frame, then `emit` with the refinement ∪ backward mask.
+    fn refine_and_emit(
+        &mut self,
+        frame: &Buffered,
+        emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>,
+    ) -> Result<()> {
+        dequantize_gray_into(&frame.gray, &mut self.gray);
+        let closed_loop = self.source == PoseSource::DvoClosedLoop;
+        let replayed_pose = match self.source {
+            PoseSource::DvoClosedLoop => None,
+            PoseSource::DvoUnmasked => Some(frame.world_from_camera),
+            PoseSource::External { .. } => frame.world_from_marker,
+        };
+        let ignore = (closed_loop && self.has_previous_seed_mask).then_some(&self.previous_seed_mask);
+        let out = self.refine.process(&FrameInput {
+            timestamp_ns: frame.timestamp_ns,
+            gray: &self.gray,
+            depth_m: &frame.depth_m,
+            world_from_marker: replayed_pose.as_ref(),
+            ignore_in_previous: ignore,
+        })?;
+        let mut moving = 0usize;
+        for ((m, &r), &b) in self
+            .mask
+            .as_mut_slice()
+            .iter_mut()
+            .zip(out.mask.as_slice())
+            .zip(frame.backward_mask.as_slice())
+        {
+            *m = r | b;
+            moving += usize::from(*m != 0);
+        }
+        let mut stats = out.stats;
+        stats.detector.mask_pixels = moving;
+        stats.moving_fraction = moving as f64 / self.size.area().max(1) as f64;
+        let output = FrameOutput {
+            mask: &self.mask,
+            stats,
+            ..out
+        };
+        emit(output)?;
+        if closed_loop {
+            for ((s, &f), &b) in self
+                .previous_seed_mask
+                .as_mut_slice()
+                .iter_mut()
+                .zip(frame.first_mask.as_slice())
+                .zip(frame.backward_mask.as_slice())
+            {
+                *s = f | b;
+            }
+            self.has_previous_seed_mask = true;
+        }
+        Ok(())
+    }
+}
+
+/// Gray in [0, 1] as u16 units of 1/65535 (clamped; NaN → 0).
+#[inline]
+fn quantize_gray(g: f32) -> u16 {
+    (g.clamp(0.0, 1.0) * 65535.0).round() as u16
+}
+
+fn dequantize_gray_into(q: &Image<u16>, gray: &mut GrayF32) {
+    for (g, &v) in gray.as_mut_slice().iter_mut().zip(q.as_slice()) {
+        *g = f32::from(v) / 65535.0;
+    }
+}
