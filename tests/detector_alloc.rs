@@ -6,7 +6,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use occmask::image_buf::ImageSize;
-use occmask::occlusion::{OcclusionConfig, OcclusionDetector};
+use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
 struct Counting;
@@ -51,8 +51,12 @@ fn detector_update_does_not_allocate_after_the_first_frame() {
             (frame.depth_m, frame.gray, sequence.current_from_previous(i))
         })
         .collect();
-    let mut detector =
-        OcclusionDetector::new(config.size, config.intrinsics(), OcclusionConfig::default()).unwrap();
+    // Appearance-gated growth is off by default; switched on here so that it is exercised.
+    let occlusion = OcclusionConfig {
+        appearance_growth: Some(AppearanceGrowthConfig::default()),
+        ..OcclusionConfig::default()
+    };
+    let mut detector = OcclusionDetector::new(config.size, config.intrinsics(), occlusion).unwrap();
     // Warm up the rayon pool and the first frames.
     for (depth, gray, motion) in &frames[..2] {
         detector.update_with_gray(depth, Some(gray), motion).unwrap();
