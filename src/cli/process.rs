@@ -163,8 +163,8 @@ pub struct ProcessArgs {
     #[arg(long)]
     pub no_undistort: bool,
 
-    /// With --pose-topic: the marker's pose in the camera frame, X,Y,Z,QX,QY,QZ,QW (the
-    /// topic gives the marker's pose; the camera's is marker · inverse of this).
+    /// With --pose-topic: the marker's pose in the camera frame, X,Y,Z,QX,QY,QZ,QW, or `bonn`
+    /// (the topic gives the marker's pose; the camera's is marker · inverse of this).
     #[arg(long, value_parser = parse_pose, allow_hyphen_values = true, requires = "pose_topic")]
     pub camera_from_marker: Option<nalgebra::Isometry3<f64>>,
 

@@ -440,6 +440,21 @@ pub fn camera_preset(name: &str) -> Option<CameraSpec> {
     }
 }
 
+/// The `--camera-from-marker` preset called `name` (`bonn`), as X, Y, Z, QX, QY, QZ, QW.
+/// `bonn` is [`bonn::marker_from_camera`] inverted: the rigid part of the dataset's published
+/// conversion (its 6 % ground-truth scale is no rigid transform and stays out; see
+/// `examples/marker_check.rs` and docs/inputs.md).
+pub fn camera_from_marker_preset(name: &str) -> Option<[f64; 7]> {
+    match name.to_ascii_lowercase().as_str() {
+        "bonn" => {
+            let camera_from_marker = bonn::marker_from_camera().inverse();
+            let (t, q) = (camera_from_marker.translation.vector, camera_from_marker.rotation);
+            Some([t.x, t.y, t.z, q.i, q.j, q.k, q.w])
+        }
+        _ => None,
+    }
+}
+
 /// The TUM camera named in a folder name: `freiburgN` or an `frN` token
 /// (`rgbd_dataset_freiburg2_desk`, `tum_fr2_desk_50`). Returns the preset name.
 pub fn camera_from_folder_name(name: &str) -> Option<&'static str> {
@@ -769,6 +784,20 @@ mod tests {
         }));
         let path = write_image(dir.path(), "m.png", gray, image::ImageFormat::Png);
         assert_eq!(read_mask(&path).unwrap().as_slice(), &[0, 0, MASK_SET, MASK_SET]);
+    }
+
+    /// The preset is the inverse of the dataset module's marker-to-camera transform.
+    #[test]
+    fn bonn_marker_preset_is_the_dataset_conversion() {
+        use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+        let [x, y, z, qx, qy, qz, qw] = camera_from_marker_preset("Bonn").unwrap();
+        let preset = nalgebra::Isometry3::from_parts(
+            Translation3::new(x, y, z),
+            UnitQuaternion::from_quaternion(Quaternion::new(qw, qx, qy, qz)),
+        );
+        let expected = bonn::marker_from_camera().inverse();
+        assert!((preset.to_homogeneous() - expected.to_homogeneous()).norm() < 1e-12);
+        assert!(camera_from_marker_preset("tum").is_none());
     }
 
     #[test]
