@@ -22,15 +22,15 @@ use occmask::geometry::PinholeIntrinsics;
 use occmask::image_buf::{depth_m_from_u16_into, gray_from_rgb8, DepthMeters, Image, ImageSize, Mask};
 use occmask::metrics::{rpe, FrameCounts, SegmentationTally};
 use occmask::occlusion::consistency::depth_consistency;
-use occmask::occlusion::{OcclusionConfig, OcclusionDetector, OcclusionStats};
+use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector, OcclusionStats};
 use occmask::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 use occmask::time::parse_seconds_to_ns;
 use occmask::trajectory::{interpolate, parse_tum_line, StampedPose};
 
 /// The default config with overrides from the environment (for experiments):
-/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0
-/// (appearance growth off), OCC_GROWTH_PHOTO, OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS,
+/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0/1
+/// (appearance growth off/on; the default is off), OCC_GROWTH_PHOTO, OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS,
 /// OCC_GROWTH_MARGIN, OCC_GROWTH_RADIUS, OCC_GROWTH_INHERIT=0/1, OCC_GROWTH_SEEDS=0/1 (its parameters).
 fn detector_config() -> OcclusionConfig {
     let mut config = OcclusionConfig::default();
@@ -46,6 +46,11 @@ fn detector_config() -> OcclusionConfig {
     }
     if let Some(v) = get("OCC_THIN_MARGIN") {
         config.thin_structure_border_margin_px = v;
+    }
+    match get("OCC_GROWTH") {
+        Some(0) => config.appearance_growth = None,
+        Some(_) => config.appearance_growth = Some(AppearanceGrowthConfig::default()),
+        None => {}
     }
     let get_f32 = |name: &str| std::env::var(name).ok().map(|v| v.parse::<f32>().unwrap());
     if let Some(growth) = config.appearance_growth.as_mut() {
@@ -70,9 +75,6 @@ fn detector_config() -> OcclusionConfig {
         if let Some(v) = get("OCC_GROWTH_INHERIT") {
             growth.inherit_accumulation = v != 0;
         }
-    }
-    if get("OCC_GROWTH") == Some(0) {
-        config.appearance_growth = None;
     }
     config
 }

@@ -6,7 +6,7 @@
 //! 2. pure algorithms (no files, no MCAP, no printing): pyramid, dvo, occlusion, metrics,
 //!    registration (undistortion and depth registration), synthetic;
 //! 3. I/O adapters: dataset readers, MCAP reading and writing;
-//! 4. the per-sequence pipeline;
+//! 4. the per-sequence pipeline, and its scoring on synthetic scenarios ([`scenario_eval`]);
 //! 5. the command-line interface (in the binary).
 #![deny(missing_docs)]
 
@@ -25,6 +25,7 @@ pub mod pipeline;
 pub mod process;
 pub mod pyramid;
 pub mod registration;
+pub mod scenario_eval;
 pub(crate) mod serde_util;
 pub mod synthetic;
 pub mod time;

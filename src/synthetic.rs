@@ -182,10 +182,83 @@ pub enum Scenario {
     SlowApproach,
     /// Nothing moves but the camera (control for false positives).
     StaticScene,
+    /// A 0.5 m box at 2.2 m is already moving sideways (0.6 m/s) at the first frame
+    /// ([`FailureClass::LateOnset`]).
+    InViewAtStart,
+    /// A 0.5 m box at 1.8 m rests for 1.5 s, then slides sideways slowly (0.35 m/s, its own width
+    /// in 43 frames) ([`FailureClass::LateOnset`]).
+    RestsThenMovesSlowly,
+    /// A box already moving at the first frame (0.8 m/s sideways) stops for 1 s, then moves off
+    /// diagonally towards the camera ([`FailureClass::LateOnset`], twice).
+    StopAndGo,
+    /// A 0.6 m × 0.7 m box straight ahead on the optical axis rests for 0.5 s, then approaches
+    /// the camera head-on at 0.7 m/s from 3.5 m to 1.4 m ([`FailureClass::HeadOnApproach`]).
+    HeadOnApproach,
+    /// The camera looks down (34°) at a desk; a 40 cm × 30 cm box slides across the desk top
+    /// into the view at 0.6 m/s, seen against the desk just behind it except for its top,
+    /// which passes in front of the far wall ([`FailureClass::NearBackground`]).
+    SlidingOnDesk,
+    /// A 1.2 m × 1.6 m board 1.3 m in front of the camera covers 76 % of the first frame and
+    /// moves sideways (0.35 m/s) ([`FailureClass::DominantFromStart`]).
+    DominantFromStart,
+    /// The desk of [`Scenario::SlidingOnDesk`] with nothing on it (static control with a
+    /// static box in view: [`FailureClass::StaticControl`]).
+    StaticDesk,
+    /// Held out: a 0.36 m box at 3 m already moving at the first frame (0.8 m/s sideways and
+    /// slightly away), another camera path and textures ([`FailureClass::LateOnset`]).
+    HeldOutInViewAtStart,
+    /// Held out: a tall box at 2.5 m rests for 1.2 s, then moves sideways and closer
+    /// (0.5 / 0.2 m/s) while the camera pans slowly ([`FailureClass::LateOnset`]).
+    HeldOutRestsThenMoves,
+    /// Held out: a 0.44 m × 0.6 m box off the optical axis is already approaching head-on at
+    /// the first frame (0.6 m/s, from 3.85 m to 1.85 m) ([`FailureClass::HeadOnApproach`]).
+    HeldOutHeadOnApproach,
+    /// Held out: the camera looks down (26°) at the floor; a 24 cm tall box slides along it into
+    /// the view (0.5 m/s) ([`FailureClass::NearBackground`]).
+    HeldOutSlidingOnFloor,
+    /// Held out: a 1.5 m × 1.8 m board 1.5 m away covers 82 % of the first frame and moves
+    /// sideways while turning (0.3 m/s, 2.3 °/s) ([`FailureClass::DominantFromStart`]).
+    HeldOutDominantFromStart,
+    /// Held out: a panning, tilted camera in a room with a static shelf and a static cabinet
+    /// ([`FailureClass::StaticControl`]).
+    HeldOutStatic,
+}
+
+/// The failure classes the later scenarios exercise (objects the occlusion detector finds
+/// late, or not at all).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FailureClass {
+    /// An object in view at the first frame, or one that rests and then starts to move: only
+    /// the parts leaving its own footprint occlude anything.
+    LateOnset,
+    /// An object approaching the camera head-on: its depth decreases by a few centimetres per
+    /// frame, far below the accumulation threshold, and only its expanding outline occludes.
+    HeadOnApproach,
+    /// An object moving close to the surface behind it: only where it passes in front of
+    /// farther background is the occlusion above the threshold.
+    NearBackground,
+    /// An object that dominates the view from the first frame (the odometry must not follow it).
+    DominantFromStart,
+    /// Nothing moves but the camera (false-positive control).
+    StaticControl,
+}
+
+impl FailureClass {
+    /// A short snake_case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            FailureClass::LateOnset => "late_onset",
+            FailureClass::HeadOnApproach => "head_on_approach",
+            FailureClass::NearBackground => "near_background",
+            FailureClass::DominantFromStart => "dominant_from_start",
+            FailureClass::StaticControl => "static_control",
+        }
+    }
 }
 
 impl Scenario {
-    /// All scenarios, in declaration order.
+    /// The original scenarios, in declaration order (those every older test and tool iterates;
+    /// [`Scenario::FAILURE_CLASSES`] and [`Scenario::HELD_OUT`] list the others, [`Scenario::EVERY`] all).
     pub const ALL: [Scenario; 7] = [
         Scenario::SmallObjectCrossing,
         Scenario::DominantObject,
@@ -195,6 +268,97 @@ impl Scenario {
         Scenario::SlowApproach,
         Scenario::StaticScene,
     ];
+
+    /// The failure-class scenarios that defaults may be developed on, one or more per
+    /// [`FailureClass`].
+    pub const FAILURE_CLASSES: [Scenario; 7] = [
+        Scenario::InViewAtStart,
+        Scenario::RestsThenMovesSlowly,
+        Scenario::StopAndGo,
+        Scenario::HeadOnApproach,
+        Scenario::SlidingOnDesk,
+        Scenario::DominantFromStart,
+        Scenario::StaticDesk,
+    ];
+
+    /// Held-out scenarios: the same failure classes with other seeds, sizes, speeds, depths and
+    /// camera paths. No default is tuned on them; report them apart.
+    pub const HELD_OUT: [Scenario; 6] = [
+        Scenario::HeldOutInViewAtStart,
+        Scenario::HeldOutRestsThenMoves,
+        Scenario::HeldOutHeadOnApproach,
+        Scenario::HeldOutSlidingOnFloor,
+        Scenario::HeldOutDominantFromStart,
+        Scenario::HeldOutStatic,
+    ];
+
+    /// Every scenario: [`Scenario::ALL`], then [`Scenario::FAILURE_CLASSES`], then
+    /// [`Scenario::HELD_OUT`].
+    pub const EVERY: [Scenario; 20] = [
+        Scenario::SmallObjectCrossing,
+        Scenario::DominantObject,
+        Scenario::EnteringWhilePanning,
+        Scenario::TwoObjectsCrossing,
+        Scenario::StillThenMoving,
+        Scenario::SlowApproach,
+        Scenario::StaticScene,
+        Scenario::InViewAtStart,
+        Scenario::RestsThenMovesSlowly,
+        Scenario::StopAndGo,
+        Scenario::HeadOnApproach,
+        Scenario::SlidingOnDesk,
+        Scenario::DominantFromStart,
+        Scenario::StaticDesk,
+        Scenario::HeldOutInViewAtStart,
+        Scenario::HeldOutRestsThenMoves,
+        Scenario::HeldOutHeadOnApproach,
+        Scenario::HeldOutSlidingOnFloor,
+        Scenario::HeldOutDominantFromStart,
+        Scenario::HeldOutStatic,
+    ];
+
+    /// The scenario called `name` ([`Self::name`]).
+    pub fn from_name(name: &str) -> Option<Scenario> {
+        Scenario::EVERY.into_iter().find(|s| s.name() == name)
+    }
+
+    /// True for the [`Scenario::HELD_OUT`] scenarios.
+    pub fn is_held_out(self) -> bool {
+        Scenario::HELD_OUT.contains(&self)
+    }
+
+    /// The failure class a later scenario was built for (`None` for the original ones, whose
+    /// static control is [`Scenario::StaticScene`]).
+    pub fn failure_class(self) -> Option<FailureClass> {
+        match self {
+            Scenario::SmallObjectCrossing
+            | Scenario::DominantObject
+            | Scenario::EnteringWhilePanning
+            | Scenario::TwoObjectsCrossing
+            | Scenario::StillThenMoving
+            | Scenario::SlowApproach
+            | Scenario::StaticScene => None,
+            Scenario::InViewAtStart
+            | Scenario::RestsThenMovesSlowly
+            | Scenario::StopAndGo
+            | Scenario::HeldOutInViewAtStart
+            | Scenario::HeldOutRestsThenMoves => Some(FailureClass::LateOnset),
+            Scenario::HeadOnApproach | Scenario::HeldOutHeadOnApproach => Some(FailureClass::HeadOnApproach),
+            Scenario::SlidingOnDesk | Scenario::HeldOutSlidingOnFloor => Some(FailureClass::NearBackground),
+            Scenario::DominantFromStart | Scenario::HeldOutDominantFromStart => {
+                Some(FailureClass::DominantFromStart)
+            }
+            Scenario::StaticDesk | Scenario::HeldOutStatic => Some(FailureClass::StaticControl),
+        }
+    }
+
+    /// True when nothing but the camera moves (the ground truth is empty in every frame).
+    pub fn is_static(self) -> bool {
+        matches!(
+            self,
+            Scenario::StaticScene | Scenario::StaticDesk | Scenario::HeldOutStatic
+        )
+    }
 
     /// A short snake_case name (for tables and file names).
     pub fn name(self) -> &'static str {
@@ -206,6 +370,19 @@ impl Scenario {
             Scenario::StillThenMoving => "still_then_moving",
             Scenario::SlowApproach => "slow_approach",
             Scenario::StaticScene => "static_scene",
+            Scenario::InViewAtStart => "in_view_at_start",
+            Scenario::RestsThenMovesSlowly => "rests_then_moves_slowly",
+            Scenario::StopAndGo => "stop_and_go",
+            Scenario::HeadOnApproach => "head_on_approach",
+            Scenario::SlidingOnDesk => "sliding_on_desk",
+            Scenario::DominantFromStart => "dominant_from_start",
+            Scenario::StaticDesk => "static_desk",
+            Scenario::HeldOutInViewAtStart => "held_out_in_view_at_start",
+            Scenario::HeldOutRestsThenMoves => "held_out_rests_then_moves",
+            Scenario::HeldOutHeadOnApproach => "held_out_head_on_approach",
+            Scenario::HeldOutSlidingOnFloor => "held_out_sliding_on_floor",
+            Scenario::HeldOutDominantFromStart => "held_out_dominant_from_start",
+            Scenario::HeldOutStatic => "held_out_static",
         }
     }
 }
@@ -229,6 +406,9 @@ pub struct CameraPath {
     pub yaw_amplitude_rad: f64,
     /// Pitch oscillation amplitude (rad).
     pub pitch_amplitude_rad: f64,
+    /// Constant pitch (rad) the oscillation is added to: positive tilts the view up (towards
+    /// −y), negative down towards the floor (a camera looking down at a desk).
+    pub pitch_offset_rad: f64,
 }
 
 impl CameraPath {
@@ -242,6 +422,7 @@ impl CameraPath {
             yaw_rate_radps: 0.0,
             yaw_amplitude_rad: 0.0,
             pitch_amplitude_rad: 0.0,
+            pitch_offset_rad: 0.0,
         }
     }
 
@@ -255,6 +436,7 @@ impl CameraPath {
             yaw_rate_radps: 0.0,
             yaw_amplitude_rad: 0.06,
             pitch_amplitude_rad: 0.03,
+            pitch_offset_rad: 0.0,
         }
     }
 
@@ -268,7 +450,7 @@ impl CameraPath {
         );
         let position = self.start_m + self.velocity_mps * t_s + sway;
         let yaw = self.yaw_rate_radps * t_s + self.yaw_amplitude_rad * (phase + 0.4).sin();
-        let pitch = self.pitch_amplitude_rad * (1.5 * phase).sin();
+        let pitch = self.pitch_offset_rad + self.pitch_amplitude_rad * (1.5 * phase).sin();
         // +yaw turns the optical axis (+z) towards +x: rotation about +y by +yaw (y points down,
         // so this is a right turn as seen from above).
         let rotation = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), yaw)
@@ -390,6 +572,10 @@ pub struct SyntheticFrame {
     pub depth_true_m: DepthMeters,
     /// Ground-truth moving-object mask (boxes that moved since the previous frame).
     pub gt_mask: Mask,
+    /// Which surface the centre ray hits first: 1 + the index of the box in
+    /// [`SyntheticSequence::boxes`], 0 for the room (moving or not: [`Self::gt_mask`] says
+    /// whether it moved; boxes beyond the 254th all read 255): splits the ground truth per object.
+    pub object_index: Image<u8>,
     /// Ground-truth camera pose.
     pub world_from_camera: Isometry3<f64>,
     /// Ground-truth pose of every box (same order as [`SyntheticSequence::boxes`]).
@@ -410,6 +596,7 @@ impl SyntheticFrame {
             depth_raw: Image::filled(size, 0),
             depth_true_m: Image::filled(size, 0.0),
             gt_mask: Image::filled(size, 0),
+            object_index: Image::filled(size, 0),
             world_from_camera: Isometry3::identity(),
             world_from_objects: Vec::new(),
             intrinsics: PinholeIntrinsics::new(1.0, 1.0, 0.0, 0.0),
@@ -432,6 +619,60 @@ fn box_at(center: Vector3<f64>, half: Vector3<f64>, legs: Vec<MotionLeg>, seed: 
     }
 }
 
+/// A box that never moves (furniture): part of the background, never in the ground truth.
+fn static_box(center: Vector3<f64>, half: Vector3<f64>, seed: u64) -> MovingBox {
+    box_at(center, half, Vec::new(), seed)
+}
+
+/// A box that has moved with `velocity_mps` since `since_s` (< 0, so it moves during frame 0's
+/// interval and frame 0's ground truth holds it) and is centred at `center_at_zero` at t = 0.
+fn box_moving_since(
+    center_at_zero: Vector3<f64>,
+    half: Vector3<f64>,
+    since_s: f64,
+    velocity_mps: Vector3<f64>,
+    yaw_rate_radps: f64,
+    seed: u64,
+) -> MovingBox {
+    box_at(
+        center_at_zero + velocity_mps * since_s,
+        half,
+        leg(since_s, f64::INFINITY, velocity_mps, yaw_rate_radps),
+        seed,
+    )
+}
+
+/// XOR-ed into the sequence seed for the room texture of the held-out scenarios, so that they
+/// are not seen through the walls the other scenarios were developed on.
+const HELD_OUT_ROOM_SALT: u64 = 0x0e1d_4e1d_5a17;
+
+/// Seconds the boxes of the "already moving" scenarios have moved before frame 0.
+const MOVING_SINCE_S: f64 = -1.0;
+
+/// Pitch of the camera looking down at the desk (34°): the desk top fills the middle of the
+/// image, its front below, a band of the far wall above.
+const DESK_CAMERA_PITCH_RAD: f64 = -0.6;
+
+/// The desk of [`Scenario::SlidingOnDesk`] and [`Scenario::StaticDesk`]: a block 2.6 m wide and
+/// 1.8 m deep standing on the floor, its top 0.7 m above the floor (y = 0.7, 0.7 m below the
+/// camera), from 0.9 m to 2.7 m ahead.
+fn desk(seed: u64) -> MovingBox {
+    static_box(
+        Vector3::new(0.0, 1.05, 1.8),
+        Vector3::new(1.3, 0.35, 0.9),
+        seed ^ 0x8d,
+    )
+}
+
+/// The camera of the desk scenarios: hand-held, looking down at the desk, drifting slowly.
+fn desk_camera() -> CameraPath {
+    CameraPath {
+        velocity_mps: Vector3::new(0.02, 0.0, 0.03),
+        pitch_offset_rad: DESK_CAMERA_PITCH_RAD,
+        ..CameraPath::handheld()
+    }
+}
+
 fn leg(start_s: f64, stop_s: f64, velocity_mps: Vector3<f64>, yaw_rate_radps: f64) -> Vec<MotionLeg> {
     vec![MotionLeg {
         start_s,
@@ -445,7 +686,11 @@ impl SyntheticSequence {
     /// Builds one of the built-in scenarios.
     pub fn new(scenario: Scenario, config: SequenceConfig) -> Self {
         let seed = config.seed;
-        let room = Room::standard(seed);
+        let room = if scenario.is_held_out() {
+            Room::standard(seed ^ HELD_OUT_ROOM_SALT)
+        } else {
+            Room::standard(seed)
+        };
         let forever = f64::INFINITY;
         let (camera, boxes, default_frames) = match scenario {
             Scenario::SmallObjectCrossing => {
@@ -530,6 +775,208 @@ impl SyntheticSequence {
                 (CameraPath::handheld(), vec![b], 120)
             }
             Scenario::StaticScene => (CameraPath::handheld(), Vec::new(), 90),
+            Scenario::InViewAtStart => {
+                let b = box_moving_since(
+                    Vector3::new(-0.7, 0.15, 2.4),
+                    Vector3::new(0.25, 0.3, 0.2),
+                    MOVING_SINCE_S,
+                    Vector3::new(0.6, 0.0, 0.0),
+                    0.0,
+                    seed ^ 0x81,
+                );
+                (CameraPath::handheld(), vec![b], 90)
+            }
+            Scenario::RestsThenMovesSlowly => {
+                let b = box_at(
+                    Vector3::new(0.5, 0.05, 2.0),
+                    Vector3::new(0.25, 0.35, 0.2),
+                    leg(1.5, forever, Vector3::new(-0.35, 0.0, 0.0), 0.0),
+                    seed ^ 0x82,
+                );
+                (CameraPath::handheld(), vec![b], 120)
+            }
+            Scenario::StopAndGo => {
+                let sideways = MotionLeg {
+                    start_s: -0.5,
+                    stop_s: 1.0,
+                    velocity_mps: Vector3::new(0.8, 0.0, 0.0),
+                    yaw_rate_radps: 0.0,
+                };
+                let off_and_closer = MotionLeg {
+                    start_s: 2.0,
+                    stop_s: forever,
+                    velocity_mps: Vector3::new(-0.3, 0.0, -0.5),
+                    yaw_rate_radps: 0.0,
+                };
+                // At x = −0.9 + 0.8 · 0.5 = −0.5 m at t = 0, −0.1 m while it rests.
+                let b = box_at(
+                    Vector3::new(-0.9, 0.2, 2.5),
+                    Vector3::new(0.2, 0.3, 0.2),
+                    vec![sideways, off_and_closer],
+                    seed ^ 0x83,
+                );
+                (CameraPath::handheld(), vec![b], 120)
+            }
+            Scenario::HeadOnApproach => {
+                // Front face from 3.5 m (t ≤ 0.5 s) to 1.4 m (t = 3.5 s, frame 105).
+                let b = box_at(
+                    Vector3::new(0.0, 0.1, 3.7),
+                    Vector3::new(0.3, 0.35, 0.2),
+                    leg(0.5, forever, Vector3::new(0.0, 0.0, -0.7), 0.0),
+                    seed ^ 0x84,
+                );
+                // Hand-held sway, but no forward drift: the box alone closes the distance.
+                let camera = CameraPath {
+                    velocity_mps: Vector3::new(0.02, 0.0, 0.0),
+                    ..CameraPath::handheld()
+                };
+                (camera, vec![b], 105)
+            }
+            Scenario::SlidingOnDesk => {
+                // Resting on the desk top (y = 0.7), 1.5 m ahead; enters the view from the left.
+                let b = box_at(
+                    Vector3::new(-1.2, 0.55, 1.5),
+                    Vector3::new(0.2, 0.15, 0.15),
+                    leg(0.0, forever, Vector3::new(0.6, 0.0, 0.0), 0.0),
+                    seed ^ 0x85,
+                );
+                (desk_camera(), vec![desk(seed), b], 100)
+            }
+            Scenario::DominantFromStart => {
+                let b = box_moving_since(
+                    Vector3::new(-0.15, 0.1, 1.4),
+                    Vector3::new(0.6, 0.8, 0.1),
+                    MOVING_SINCE_S,
+                    Vector3::new(0.35, 0.0, 0.0),
+                    0.0,
+                    seed ^ 0x86,
+                );
+                (CameraPath::handheld(), vec![b], 120)
+            }
+            Scenario::StaticDesk => (desk_camera(), vec![desk(seed)], 90),
+            Scenario::HeldOutInViewAtStart => {
+                let b = box_moving_since(
+                    Vector3::new(0.6, -0.05, 3.1),
+                    Vector3::new(0.18, 0.25, 0.15),
+                    2.0 * MOVING_SINCE_S,
+                    Vector3::new(-0.8, 0.0, 0.1),
+                    0.0,
+                    seed ^ 0x91,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::new(0.1, -0.05, 0.0),
+                    velocity_mps: Vector3::new(-0.04, 0.0, 0.05),
+                    sway_amplitude_m: Vector3::new(0.04, 0.02, 0.05),
+                    sway_period_s: 3.3,
+                    yaw_rate_radps: 0.04,
+                    yaw_amplitude_rad: 0.05,
+                    pitch_amplitude_rad: 0.02,
+                    pitch_offset_rad: 0.0,
+                };
+                (camera, vec![b], 90)
+            }
+            Scenario::HeldOutRestsThenMoves => {
+                let b = box_at(
+                    Vector3::new(0.7, 0.0, 2.7),
+                    Vector3::new(0.2, 0.45, 0.18),
+                    leg(1.2, forever, Vector3::new(-0.5, 0.0, -0.2), 0.0),
+                    seed ^ 0x92,
+                );
+                let camera = CameraPath {
+                    velocity_mps: Vector3::new(0.03, 0.0, 0.04),
+                    sway_amplitude_m: Vector3::new(0.05, 0.03, 0.03),
+                    sway_period_s: 2.2,
+                    yaw_rate_radps: -0.06,
+                    ..CameraPath::handheld()
+                };
+                (camera, vec![b], 100)
+            }
+            Scenario::HeldOutHeadOnApproach => {
+                // Front face from 3.85 m (frame 0) to 1.85 m (frame 100).
+                let b = box_moving_since(
+                    Vector3::new(0.25, -0.05, 4.0),
+                    Vector3::new(0.22, 0.3, 0.15),
+                    MOVING_SINCE_S,
+                    Vector3::new(0.0, 0.0, -0.6),
+                    0.0,
+                    seed ^ 0x93,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::zeros(),
+                    velocity_mps: Vector3::new(-0.02, 0.0, 0.0),
+                    sway_amplitude_m: Vector3::new(0.05, 0.03, 0.03),
+                    sway_period_s: 2.3,
+                    yaw_rate_radps: 0.0,
+                    yaw_amplitude_rad: 0.04,
+                    pitch_amplitude_rad: 0.025,
+                    pitch_offset_rad: 0.0,
+                };
+                (camera, vec![b], 100)
+            }
+            Scenario::HeldOutSlidingOnFloor => {
+                // Resting on the floor (y = 1.4), 2.2 m ahead; enters the view from the right.
+                let b = box_at(
+                    Vector3::new(1.8, 1.28, 2.2),
+                    Vector3::new(0.2, 0.12, 0.2),
+                    leg(0.0, forever, Vector3::new(-0.5, 0.0, -0.05), 0.0),
+                    seed ^ 0x94,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::new(0.0, -0.1, 0.0),
+                    velocity_mps: Vector3::new(0.0, 0.0, 0.04),
+                    sway_amplitude_m: Vector3::new(0.05, 0.02, 0.03),
+                    sway_period_s: 2.9,
+                    yaw_rate_radps: 0.0,
+                    yaw_amplitude_rad: 0.05,
+                    pitch_amplitude_rad: 0.02,
+                    pitch_offset_rad: -0.45,
+                };
+                (camera, vec![b], 100)
+            }
+            Scenario::HeldOutDominantFromStart => {
+                let b = box_moving_since(
+                    Vector3::new(0.15, 0.0, 1.62),
+                    Vector3::new(0.75, 0.9, 0.12),
+                    MOVING_SINCE_S,
+                    Vector3::new(-0.3, 0.0, 0.0),
+                    0.04,
+                    seed ^ 0x95,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::zeros(),
+                    velocity_mps: Vector3::new(-0.03, 0.0, 0.05),
+                    sway_amplitude_m: Vector3::new(0.05, 0.03, 0.03),
+                    sway_period_s: 3.1,
+                    yaw_rate_radps: 0.0,
+                    yaw_amplitude_rad: 0.05,
+                    pitch_amplitude_rad: 0.025,
+                    pitch_offset_rad: 0.0,
+                };
+                (camera, vec![b], 120)
+            }
+            Scenario::HeldOutStatic => {
+                let shelf = static_box(
+                    Vector3::new(-1.6, 0.5, 2.6),
+                    Vector3::new(0.25, 0.9, 0.6),
+                    seed ^ 0x96,
+                );
+                let cabinet = static_box(
+                    Vector3::new(0.8, 1.1, 2.8),
+                    Vector3::new(0.6, 0.3, 0.3),
+                    seed ^ 0x97,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::zeros(),
+                    velocity_mps: Vector3::new(0.03, 0.0, 0.06),
+                    sway_amplitude_m: Vector3::new(0.05, 0.03, 0.04),
+                    sway_period_s: 2.5,
+                    yaw_rate_radps: 0.1,
+                    yaw_amplitude_rad: 0.03,
+                    pitch_amplitude_rad: 0.03,
+                    pitch_offset_rad: -0.15,
+                };
+                (camera, vec![shelf, cabinet], 90)
+            }
         };
         Self {
             scenario: Some(scenario),
@@ -684,25 +1131,34 @@ impl SyntheticSequence {
             .par_chunks_mut(ROWS_PER_TASK * width)
             .zip(frame.rgb.as_mut_slice().par_chunks_mut(ROWS_PER_TASK * width))
             .zip(frame.gt_mask.as_mut_slice().par_chunks_mut(ROWS_PER_TASK * width))
+            .zip(
+                frame
+                    .object_index
+                    .as_mut_slice()
+                    .par_chunks_mut(ROWS_PER_TASK * width),
+            )
             .enumerate()
-            .for_each(|(chunk, ((depth_rows, rgb_rows), mask_rows))| {
+            .for_each(|(chunk, (((depth_rows, rgb_rows), mask_rows), object_rows))| {
                 let rows = depth_rows
                     .chunks_exact_mut(width)
                     .zip(rgb_rows.chunks_exact_mut(width))
-                    .zip(mask_rows.chunks_exact_mut(width));
-                for (row, ((depth_row, rgb_row), mask_row)) in rows.enumerate() {
+                    .zip(mask_rows.chunks_exact_mut(width))
+                    .zip(object_rows.chunks_exact_mut(width));
+                for (row, (((depth_row, rgb_row), mask_row), object_row)) in rows.enumerate() {
                     let y = chunk * ROWS_PER_TASK + row;
                     for x in 0..width {
                         let Some((ray_x, ray_y)) = view.rays.centre(x, y) else {
                             // No ray (beyond a lens model's fold): nothing is seen there.
                             depth_row[x] = 0.0;
                             mask_row[x] = 0;
+                            object_row[x] = 0;
                             rgb_row[x] = [0; 3];
                             continue;
                         };
                         let hit = view.cast(ray_x, ray_y);
                         depth_row[x] = hit.depth_m as f32;
                         mask_row[x] = if hit.moving { MASK_SET } else { 0 };
+                        object_row[x] = hit.object;
                         if !shade_colour {
                             continue;
                         }
@@ -951,6 +1407,8 @@ struct Hit<'a> {
     u_m: f64,
     v_m: f64,
     moving: bool,
+    /// 1 + the box's index, 0 for the room ([`SyntheticFrame::object_index`]).
+    object: u8,
 }
 
 impl ViewSetup {
@@ -1007,6 +1465,7 @@ impl ViewSetup {
                 u_m: u,
                 v_m: v,
                 moving: b.moving,
+                object: u8::try_from(index + 1).unwrap_or(u8::MAX),
             };
         }
         let direction = self.world_rotation * ray_in_camera;
@@ -1019,6 +1478,7 @@ impl ViewSetup {
             u_m: u,
             v_m: v,
             moving: false,
+            object: 0,
         }
     }
 }
@@ -1480,6 +1940,115 @@ mod tests {
                 scenario.name()
             );
         }
+    }
+
+    /// What each failure-class scenario is built to show holds in its ground truth.
+    #[test]
+    fn failure_class_scenarios_show_their_class() {
+        let config = SequenceConfig {
+            size: ImageSize::new(160, 120),
+            ..SequenceConfig::default()
+        };
+        for scenario in Scenario::FAILURE_CLASSES.into_iter().chain(Scenario::HELD_OUT) {
+            let name = scenario.name();
+            let class = scenario
+                .failure_class()
+                .expect("every later scenario has a class");
+            assert_eq!(Scenario::from_name(name), Some(scenario));
+            assert_eq!(
+                scenario.is_static(),
+                class == FailureClass::StaticControl,
+                "{name}"
+            );
+            let sequence = SyntheticSequence::new(scenario, config);
+            let frames: Vec<SyntheticFrame> = (0..sequence.len()).map(|i| sequence.frame(i)).collect();
+            let with_objects = frames.iter().filter(|f| f.gt_fraction() > 0.0).count();
+            if scenario.is_static() {
+                assert_eq!(with_objects, 0, "{name}");
+            } else {
+                assert!(
+                    with_objects >= sequence.len() / 2,
+                    "{name}: {with_objects} frames"
+                );
+            }
+            for f in &frames {
+                // The ground truth lies on boxes, and only on boxes that move.
+                for (&truth, &object) in f.gt_mask.as_slice().iter().zip(f.object_index.as_slice()) {
+                    if truth != 0 {
+                        assert!(object > 0, "{name}: ground truth on the room");
+                        let b = &sequence.boxes[usize::from(object) - 1];
+                        assert!(!b.legs.is_empty(), "{name}: ground truth on a static box");
+                    }
+                }
+            }
+            let step = sequence.current_from_previous(10).translation.vector.norm();
+            assert!(step > 1e-4 && step < 0.03, "{name}: camera step {step}");
+            let first = frames[0].gt_fraction();
+            match scenario {
+                Scenario::InViewAtStart
+                | Scenario::StopAndGo
+                | Scenario::HeldOutInViewAtStart
+                | Scenario::HeldOutHeadOnApproach => {
+                    assert!(first > 0.01, "{name}: moving in view at frame 0 ({first})")
+                }
+                Scenario::DominantFromStart | Scenario::HeldOutDominantFromStart => {
+                    assert!(first > 0.5, "{name}: {first} of frame 0")
+                }
+                Scenario::RestsThenMovesSlowly
+                | Scenario::HeldOutRestsThenMoves
+                | Scenario::HeadOnApproach => {
+                    // In view but resting: the first frames have no ground truth, yet the box is seen.
+                    assert_eq!(first, 0.0, "{name}");
+                    assert!(frames[0].object_index.as_slice().iter().any(|&o| o > 0), "{name}");
+                }
+                Scenario::SlidingOnDesk | Scenario::HeldOutSlidingOnFloor => {
+                    // Enters the view.
+                    assert_eq!(first, 0.0, "{name}");
+                }
+                _ => {}
+            }
+            if class == FailureClass::HeadOnApproach {
+                // The box moves along the optical axis of the camera: straight at it.
+                let b = &sequence.boxes[0];
+                for leg in b.legs.iter().filter(|l| l.velocity_mps.norm() > 0.0) {
+                    let v = leg.velocity_mps;
+                    assert!(v.z < 0.0 && v.x == 0.0 && v.y == 0.0, "{name}: {v:?}");
+                }
+                let centre = frames[0].world_from_objects[0].translation.vector;
+                assert!(centre.x.abs() < 0.3 && centre.y.abs() < 0.2, "{name}: {centre:?}");
+            }
+            if class == FailureClass::NearBackground {
+                // A static box or the floor lies right under the sliding box.
+                let b = &sequence.boxes[sequence.boxes.len() - 1];
+                let bottom = b.world_from_object_start.translation.vector.y + b.half_extents_m.y;
+                let support = sequence
+                    .boxes
+                    .iter()
+                    .filter(|s| s.legs.is_empty())
+                    .map(|s| s.world_from_object_start.translation.vector.y - s.half_extents_m.y)
+                    .chain([sequence.room.max_m.y])
+                    .any(|top| (top - bottom).abs() < 1e-9);
+                assert!(support, "{name}: nothing under the box");
+            }
+        }
+    }
+
+    #[test]
+    fn object_index_names_the_box_seen_first() {
+        let config = SequenceConfig {
+            size: ImageSize::new(160, 120),
+            sensor: DepthSensorModel::ideal(),
+            ..SequenceConfig::default()
+        };
+        let sequence = SyntheticSequence::new(Scenario::SlidingOnDesk, config);
+        let frame = sequence.frame(50);
+        let count = |k: u8| frame.object_index.as_slice().iter().filter(|&&o| o == k).count();
+        // The desk (box 1) fills much of the view, the sliding box (box 2) some of it, and the
+        // sliding box is exactly the ground truth.
+        assert!(count(1) > frame.object_index.size().area() / 3);
+        assert!(count(2) > 100);
+        let truth = frame.gt_mask.as_slice().iter().filter(|&&m| m != 0).count();
+        assert_eq!(truth, count(2));
     }
 
     #[test]

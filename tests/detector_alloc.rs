@@ -51,12 +51,12 @@ fn detector_update_does_not_allocate_after_the_first_frame() {
             (frame.depth_m, frame.gray, sequence.current_from_previous(i))
         })
         .collect();
-    // Appearance-gated growth is off by default; switched on here so that it is exercised.
-    let occlusion = OcclusionConfig {
+    // Appearance-gated growth on (the default leaves it off), so its buffers are counted too.
+    let detector_config = OcclusionConfig {
         appearance_growth: Some(AppearanceGrowthConfig::default()),
         ..OcclusionConfig::default()
     };
-    let mut detector = OcclusionDetector::new(config.size, config.intrinsics(), occlusion).unwrap();
+    let mut detector = OcclusionDetector::new(config.size, config.intrinsics(), detector_config).unwrap();
     // Warm up the rayon pool and the first frames.
     for (depth, gray, motion) in &frames[..2] {
         detector.update_with_gray(depth, Some(gray), motion).unwrap();

@@ -3,14 +3,15 @@
 //! mean F1 ≥ 0.85 per scenario; static control ≤ 0.5 % false positives per frame after 5
 //! frames; on the dominant-object scenario the closed loop has ≥ 2× lower RPE than unmasked DVO).
 //!
-//! One scenario (still, then moving) needs appearance-gated object completion (on by default)
-//! for the target, for the reason given in `detector_synthetic.rs`.
+//! One scenario (still, then moving) needs appearance-gated object completion (off by default)
+//! for the target in one causal pass, for the reason given in `detector_synthetic.rs`.
 #![allow(clippy::unwrap_used)]
 
 use nalgebra::Isometry3;
 use occmask::dvo::DvoStatus;
 use occmask::image_buf::ImageSize;
 use occmask::metrics::{rpe, RpeStats, SegmentationSummary, SegmentationTally};
+use occmask::occlusion::AppearanceGrowthConfig;
 use occmask::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
@@ -27,15 +28,23 @@ struct Run {
 }
 
 fn run(scenario: Scenario, pose_source: PoseSource) -> Run {
+    run_with(
+        scenario,
+        ProcessorConfig {
+            pose_source,
+            ..ProcessorConfig::default()
+        },
+    )
+}
+
+/// `scenario` through the causal pipeline with `config`.
+fn run_with(scenario: Scenario, config: ProcessorConfig) -> Run {
+    let pose_source = config.pose_source;
     let sequence_config = SequenceConfig {
         size: SIZE,
         ..SequenceConfig::default()
     };
     let sequence = SyntheticSequence::new(scenario, sequence_config);
-    let config = ProcessorConfig {
-        pose_source,
-        ..ProcessorConfig::default()
-    };
     let mut processor = Processor::new(SIZE, sequence_config.intrinsics(), config).unwrap();
     let mut tally = SegmentationTally::default();
     let mut estimated = Vec::new();
@@ -95,7 +104,10 @@ fn closed_loop() -> PoseSource {
 }
 
 fn assert_f1(scenario: Scenario, at_least: f64) {
-    let run = run(scenario, closed_loop());
+    assert_run_f1(scenario, &run(scenario, closed_loop()), at_least);
+}
+
+fn assert_run_f1(scenario: Scenario, run: &Run, at_least: f64) {
     assert!(
         run.segmentation.mean_f1 >= at_least,
         "{}: F1 {:.3} < {at_least}",
@@ -126,11 +138,20 @@ fn entering_while_panning() {
     assert_f1(Scenario::EnteringWhilePanning, F1_TARGET);
 }
 
-/// Measured 0.873 (0.807 without appearance-gated object completion, which the paper's method
-/// cannot reach the target without): see `detector_synthetic.rs`.
+/// One pass cannot reach the target on this scenario without appearance-gated object completion
+/// (off by default): measured 0.873 with it, 0.828 without (see `detector_synthetic.rs`).
 #[test]
-fn still_then_moving() {
-    assert_f1(Scenario::StillThenMoving, F1_TARGET);
+fn still_then_moving_with_appearance_growth() {
+    let mut config = ProcessorConfig::default();
+    config.occlusion.appearance_growth = Some(AppearanceGrowthConfig::default());
+    let run = run_with(Scenario::StillThenMoving, config);
+    assert_run_f1(Scenario::StillThenMoving, &run, F1_TARGET);
+}
+
+/// The causal default (no appearance growth) on the same scenario: measured 0.828; bound 0.80.
+#[test]
+fn still_then_moving_causal_default() {
+    assert_f1(Scenario::StillThenMoving, 0.80);
 }
 
 #[test]

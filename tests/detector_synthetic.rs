@@ -5,11 +5,20 @@
 //! One scenario (still, then moving) reaches the 0.90 target with the causal detector only with
 //! appearance-gated object completion, which its test switches on (the default leaves it off,
 //! see docs/method.md, "Deviations").
+//!
+//! The failure-class scenarios (`Scenario::FAILURE_CLASSES`, `Scenario::HELD_OUT`) run through
+//! the whole pipeline instead: the default `ProcessorConfig` in the default mode (offline, DVO
+//! closed loop) at 320×240, against the targets F1 ≥ 0.85 with DVO over all frames, onset ≤ 5
+//! frames (`occmask::metrics::onset`) and static controls ≤ 0.5 % false positives. Where a
+//! class does not meet them yet, its test holds the figure the code meets (with the measured
+//! value and the margin stated) and an ignored test states the target.
 #![allow(clippy::unwrap_used)]
 
 use occmask::image_buf::ImageSize;
 use occmask::metrics::{FrameCounts, SegmentationSummary, SegmentationTally};
 use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector};
+use occmask::pipeline::ProcessorConfig;
+use occmask::scenario_eval::{evaluate, EvalMode, RenderedSequence, ScenarioScore};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
 const SIZE: ImageSize = ImageSize::new(640, 480);
@@ -144,5 +153,221 @@ fn static_control_has_almost_no_false_positives() {
             "frame {i}: {:.3} % false positives",
             100.0 * c.false_positive_fraction()
         );
+    }
+}
+
+/// Resolution of the failure-class tests: a quarter of VGA renders and processes a 100-frame
+/// scenario in ≈ 10 s on the 2-core machine (640×480: ≈ 1 min).
+const CLASS_SIZE: ImageSize = ImageSize::new(320, 240);
+/// The target for the failure classes: mean F1 with DVO over all frames with an object.
+const CLASS_F1_TARGET: f64 = 0.85;
+/// The target onset: frames from an object's start of motion or entry until half of it is masked.
+const ONSET_TARGET_FRAMES: usize = 5;
+
+/// `scenario` at [`CLASS_SIZE`] through the default configuration in the default mode (offline,
+/// DVO closed loop).
+fn default_mode(scenario: Scenario) -> ScenarioScore {
+    let config = SequenceConfig {
+        size: CLASS_SIZE,
+        ..SequenceConfig::default()
+    };
+    let rendered = RenderedSequence::render(&SyntheticSequence::new(scenario, config));
+    let score = evaluate(&rendered, EvalMode::DvoOffline, &ProcessorConfig::default()).unwrap();
+    let s = &score.segmentation;
+    println!(
+        "{}{}: F1 {:.3} (P {:.3}, R {:.3}) over {} frames, onset {} [{}], max FP without objects {:.3} %, ATE {:.3} m",
+        if scenario.is_held_out() { "held out: " } else { "" },
+        scenario.name(),
+        s.mean_f1,
+        s.mean_precision,
+        s.mean_recall,
+        s.frames_with_truth,
+        onset_text(&score),
+        score
+            .onset_runs
+            .iter()
+            .map(|r| format!("{}:{:?}", r.first_frame, r.onset_frames))
+            .collect::<Vec<_>>()
+            .join(" "),
+        100.0 * score.max_fp_fraction_without_objects,
+        score.ate_m
+    );
+    score
+}
+
+fn onset_text(score: &ScenarioScore) -> String {
+    match (score.worst_onset_frames, score.onset_never) {
+        (_, true) => "never".into(),
+        (Some(d), false) => format!("{d} frames"),
+        (None, false) => "–".into(),
+    }
+}
+
+/// Mean F1 ≥ `f1_at_least` and every run's onset ≤ `onset_at_most` frames.
+fn assert_class(score: &ScenarioScore, name: &str, f1_at_least: f64, onset_at_most: usize) {
+    assert!(
+        score.segmentation.mean_f1 >= f1_at_least,
+        "{name}: F1 {:.3} < {f1_at_least}",
+        score.segmentation.mean_f1
+    );
+    assert!(
+        !score.onset_never && score.worst_onset_frames.is_some_and(|d| d <= onset_at_most),
+        "{name}: onset {} > {onset_at_most} frames",
+        onset_text(score)
+    );
+}
+
+/// Late onset, an object moving at the first frame: the backward pass finds it from frame 0.
+/// Measured F1 0.984, onset 0 (the causal mode: F1 0.660, onset 33); bounds: the targets.
+#[test]
+fn failure_class_in_view_at_start() {
+    let score = default_mode(Scenario::InViewAtStart);
+    assert_class(&score, "in_view_at_start", CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
+}
+
+/// Late onset, an object that stops and moves again: both starts found at once.
+/// Measured F1 0.981, onsets 0 and 0; bounds: the targets.
+#[test]
+fn failure_class_stop_and_go() {
+    let score = default_mode(Scenario::StopAndGo);
+    assert_class(&score, "stop_and_go", CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
+}
+
+/// Late onset, an object that rests for 1.5 s and then slides slowly (its own width in 43
+/// frames): below the targets. Measured F1 0.778, onset 24 frames; bounds F1 0.74, onset 28.
+/// The true pose reaches F1 0.917, onset 0: the closed loop's DVO treats the slowly moving box
+/// as background until it is masked.
+#[test]
+fn failure_class_rests_then_moves_slowly() {
+    let score = default_mode(Scenario::RestsThenMovesSlowly);
+    assert_class(&score, "rests_then_moves_slowly", 0.74, 28);
+}
+
+/// The target for [`failure_class_rests_then_moves_slowly`] (not met: F1 0.778, onset 24).
+#[test]
+#[ignore = "not met by the default: F1 0.778, onset 24 frames"]
+fn failure_class_rests_then_moves_slowly_target() {
+    let score = default_mode(Scenario::RestsThenMovesSlowly);
+    assert_class(
+        &score,
+        "rests_then_moves_slowly",
+        CLASS_F1_TARGET,
+        ONSET_TARGET_FRAMES,
+    );
+}
+
+/// Head-on approach: never found (F1 0.000 in every mode, also with the true pose and with
+/// `sub_threshold_retention` 0.9). What the default does meet: the approaching box does not
+/// drag the odometry (measured ATE 2.7 cm over 105 frames; bound 4 cm) and nothing else is
+/// flagged (measured no false positive on the 15 frames before it moves).
+#[test]
+fn failure_class_head_on_approach_odometry() {
+    let score = default_mode(Scenario::HeadOnApproach);
+    assert!(score.ate_m <= 0.04, "ATE {:.3} m", score.ate_m);
+    assert!(
+        score.max_fp_fraction_without_objects <= STATIC_FP_LIMIT,
+        "{:.3} % false positives before it moves",
+        100.0 * score.max_fp_fraction_without_objects
+    );
+}
+
+/// The target for the head-on approach (not met: F1 0.000, never found).
+#[test]
+#[ignore = "not met by the default: F1 0.000, never found"]
+fn failure_class_head_on_approach_target() {
+    let score = default_mode(Scenario::HeadOnApproach);
+    assert_class(&score, "head_on_approach", CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
+}
+
+/// Near background, a box sliding on a desk: found only once its top passes in front of the
+/// far wall. Measured F1 0.615, onset 39 frames; bounds F1 0.57, onset 45.
+#[test]
+fn failure_class_sliding_on_desk() {
+    let score = default_mode(Scenario::SlidingOnDesk);
+    assert_class(&score, "sliding_on_desk", 0.57, 45);
+}
+
+/// The target for [`failure_class_sliding_on_desk`] (not met: F1 0.615, onset 39).
+#[test]
+#[ignore = "not met by the default: F1 0.615, onset 39 frames"]
+fn failure_class_sliding_on_desk_target() {
+    let score = default_mode(Scenario::SlidingOnDesk);
+    assert_class(&score, "sliding_on_desk", CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
+}
+
+/// Dominant from the first frame: DVO follows the board and the mask never forms. Measured F1
+/// 0.035, never half found, ATE 0.286 m (the true pose: F1 0.889, onset 0). The bounds hold
+/// what is left (F1 0.02, ATE 0.33 m).
+#[test]
+fn failure_class_dominant_from_start() {
+    let score = default_mode(Scenario::DominantFromStart);
+    assert!(
+        score.segmentation.mean_f1 >= 0.02,
+        "F1 {:.3}",
+        score.segmentation.mean_f1
+    );
+    assert!(score.ate_m <= 0.33, "ATE {:.3} m", score.ate_m);
+}
+
+/// The target for the dominant-from-start class (not met: F1 0.035, never found).
+#[test]
+#[ignore = "not met by the default: F1 0.035, never found"]
+fn failure_class_dominant_from_start_target() {
+    let score = default_mode(Scenario::DominantFromStart);
+    assert_class(
+        &score,
+        "dominant_from_start",
+        CLASS_F1_TARGET,
+        ONSET_TARGET_FRAMES,
+    );
+}
+
+/// The static control with a desk in view. Measured 0 false positives on every frame.
+#[test]
+fn failure_class_static_desk() {
+    let score = default_mode(Scenario::StaticDesk);
+    assert_eq!(score.segmentation.frames_with_truth, 0);
+    assert!(
+        score.max_fp_fraction_without_objects <= STATIC_FP_LIMIT,
+        "{:.3} %",
+        100.0 * score.max_fp_fraction_without_objects
+    );
+}
+
+/// Held out (no default was tuned on these; reported apart, bounds looser): measured at
+/// 320×240 F1 / onset: in view at start 0.942 / 0, rests then moves 0.914 / 0, head-on 0.000 /
+/// never, sliding on the floor 0.000 / never, dominant from start 0.203 / never (ATE 0.036 m);
+/// static 0 % false positives. Bounds: the targets where they are met; dominant F1 0.12 and
+/// ATE 0.10 m; head-on and floor sliding are found nowhere and hold only their odometry
+/// (measured ATE 0.041 / 0.045 m; bound 0.08 m).
+#[test]
+fn held_out_scenarios() {
+    for scenario in Scenario::HELD_OUT {
+        let score = default_mode(scenario);
+        let name = scenario.name();
+        match scenario {
+            Scenario::HeldOutInViewAtStart | Scenario::HeldOutRestsThenMoves => {
+                assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES)
+            }
+            Scenario::HeldOutDominantFromStart => {
+                assert!(
+                    score.segmentation.mean_f1 >= 0.12,
+                    "{name}: F1 {:.3}",
+                    score.segmentation.mean_f1
+                );
+                assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
+            }
+            Scenario::HeldOutHeadOnApproach | Scenario::HeldOutSlidingOnFloor => {
+                assert!(score.ate_m <= 0.08, "{name}: ATE {:.3} m", score.ate_m);
+            }
+            Scenario::HeldOutStatic => {
+                assert!(
+                    score.max_fp_fraction_without_objects <= STATIC_FP_LIMIT,
+                    "{name}: {:.3} %",
+                    100.0 * score.max_fp_fraction_without_objects
+                );
+            }
+            _ => unreachable!("{name} is not held out"),
+        }
     }
 }

@@ -181,8 +181,13 @@ fn frames_below(records: &[FrameRecord], from: usize, min_f1: f64) -> Vec<(usize
 
 /// Translation error of the estimated step i−1 → i against the truth (m).
 fn step_error_m(records: &[FrameRecord], i: usize) -> f64 {
-    let estimated = records[i].world_from_camera.inverse() * records[i - 1].world_from_camera;
-    let truth = records[i].truth.inverse() * records[i - 1].truth;
+    motion_error_m(records, i - 1, i)
+}
+
+/// Translation error of the estimated motion from frame `from` to frame `to`.
+fn motion_error_m(records: &[FrameRecord], from: usize, to: usize) -> f64 {
+    let estimated = records[to].world_from_camera.inverse() * records[from].world_from_camera;
+    let truth = records[to].truth.inverse() * records[from].truth;
     (estimated.translation.vector - truth.translation.vector).norm()
 }
 
@@ -278,7 +283,11 @@ fn short_depth_dropout_is_bridged_without_losing_the_masks() {
         records[end].stats
     );
     assert!(records.iter().all(|r| !r.stats.detector_reset));
-    assert!(step_error_m(&records, end) < 0.01);
+    // The bridged motion (the last frame before to the first after) is as good as one frame's
+    // (measured 1–1.5 mm per frame around the gap); the step from the last constant-velocity
+    // frame also carries that fallback's drift (measured 14 mm over 4 frames).
+    let bridged = motion_error_m(&records, start - 1, end);
+    assert!(bridged < 0.005, "bridged motion off by {bridged} m");
     let low = frames_below(&records, OBJECT_VISIBLE_FROM, 0.9);
     assert!(low.iter().all(|(i, _)| (start..end).contains(i)), "{low:?}");
 }
@@ -306,9 +315,10 @@ fn flat_colour_keeps_the_detector_on_constant_velocity() {
 }
 
 #[test]
-fn structureless_gray_never_reports_a_converged_motion() {
-    // Gray with sensor noise but no structure (depth intact): DVO must fail or be rejected,
-    // never pass a motion as converged.
+fn structureless_gray_never_reports_a_wrong_motion_as_converged() {
+    // Gray with sensor noise but no structure (depth intact): DVO must fail, be rejected, or
+    // converge on the right motion (the closed loop's depth term can track the intact geometry:
+    // measured 2.0 mm off on the first such frame, against 1–1.5 mm per frame before).
     let (start, end) = (25, 30);
     let seq = sequence(Scenario::SmallObjectCrossing, 50);
     let records = run(
@@ -318,14 +328,19 @@ fn structureless_gray_never_reports_a_converged_motion() {
         |i| seq.world_from_camera(i),
     );
     for (k, r) in records[start..end].iter().enumerate() {
-        assert!(
-            r.stats.outcome.is_failure(),
-            "frame {}: {:?}",
-            start + k,
-            r.stats.outcome
-        );
-        assert_eq!(r.stats.pose_fallback, PoseFallback::ConstantVelocity);
+        let i = start + k;
+        if r.stats.outcome == PoseOutcome::Tracked {
+            let error = step_error_m(&records, i);
+            assert!(error < 0.004, "frame {i}: tracked, {error} m off");
+        } else {
+            assert!(r.stats.outcome.is_failure(), "frame {i}: {:?}", r.stats.outcome);
+            assert_eq!(r.stats.pose_fallback, PoseFallback::ConstantVelocity);
+        }
     }
+    assert!(
+        records[start..end].iter().any(|r| r.stats.outcome.is_failure()),
+        "a structureless reference leaves too few pixels"
+    );
     // The first frame after (tracked against a structureless reference) may fail too.
     assert!(records[end + 1..]
         .iter()

@@ -145,12 +145,20 @@ impl IgnoreCompletion {
         self.pool(mask, depth_m);
         self.label_components();
         let added = self.grow();
-        // Every set cell (the mask's cells and those the growth added).
+        // Every set cell (the mask's cells and those the growth added): each cell row's pixel
+        // row is written once and copied to the cell's other rows.
         let (w, cw) = (self.size.width, self.cells.width);
-        for (y, out_row) in out.as_mut_slice().chunks_exact_mut(w).enumerate() {
-            let cell_row = &self.set[(y / CELL_PX) * cw..(y / CELL_PX + 1) * cw];
-            for (x, o) in out_row.iter_mut().enumerate() {
-                *o = if cell_row[x / CELL_PX] { MASK_SET } else { 0 };
+        for (cell_row, out_rows) in self
+            .set
+            .chunks_exact(cw)
+            .zip(out.as_mut_slice().chunks_mut(CELL_PX * w))
+        {
+            let (first, rest) = out_rows.split_at_mut(w);
+            for (o, &set) in first.chunks_mut(CELL_PX).zip(cell_row) {
+                o.fill(if set { MASK_SET } else { 0 });
+            }
+            for row in rest.chunks_exact_mut(w) {
+                row.copy_from_slice(first);
             }
         }
         Ok(added)
@@ -159,7 +167,9 @@ impl IgnoreCompletion {
     /// The cell grid of `mask` and `depth_m`.
     fn pool(&mut self, mask: &Mask, depth_m: &DepthMeters) {
         self.set.fill(false);
-        self.depth_m.fill(0.0);
+        // The nearest valid depth, branch-free: invalid pixels (≤ 0 or NaN) count as infinitely
+        // far, and a cell left infinite has none.
+        self.depth_m.fill(f32::INFINITY);
         let (w, cw) = (self.size.width, self.cells.width);
         for (y, (mask_row, depth_row)) in mask
             .as_slice()
@@ -168,13 +178,20 @@ impl IgnoreCompletion {
             .enumerate()
         {
             let row = (y / CELL_PX) * cw;
-            for (x, (&m, &z)) in mask_row.iter().zip(depth_row).enumerate() {
-                let c = row + x / CELL_PX;
-                self.set[c] |= m != 0;
-                let d = &mut self.depth_m[c];
-                if z > 0.0 && (*d == 0.0 || z < *d) {
-                    *d = z;
+            let cells = self.set[row..row + cw]
+                .iter_mut()
+                .zip(&mut self.depth_m[row..row + cw]);
+            for ((set, nearest), (m, z)) in cells.zip(mask_row.chunks(CELL_PX).zip(depth_row.chunks(CELL_PX)))
+            {
+                *set |= m.iter().any(|&v| v != 0);
+                for &z in z {
+                    *nearest = nearest.min(if z > 0.0 { z } else { f32::INFINITY });
                 }
+            }
+        }
+        for nearest in &mut self.depth_m {
+            if *nearest == f32::INFINITY {
+                *nearest = 0.0;
             }
         }
     }
@@ -368,5 +385,49 @@ mod tests {
             completion.complete(&Mask::filled(size, 0), &depth, &mut out),
             Err(Error::SizeMismatch { .. })
         ));
+    }
+
+    /// The cell grid against a per-pixel reference, on an odd size (partial cells at the right
+    /// and bottom) with invalid depths (0, negative, NaN) scattered in.
+    #[test]
+    fn pooling_matches_the_per_pixel_reference() {
+        let size = ImageSize::new(37, 23);
+        let depth = DepthMeters::from_fn(size, |x, y| match (x * 7 + y * 13) % 11 {
+            0 => 0.0,
+            1 => -1.0,
+            2 => f32::NAN,
+            k => 1.0 + k as f32 * 0.1 + (x + y) as f32 * 0.01,
+        });
+        let mask = Mask::from_fn(size, |x, y| if (x * 5 + y * 3) % 17 == 0 { MASK_SET } else { 0 });
+        let mut completion = IgnoreCompletion::new(size, CONFIG).unwrap();
+        completion.pool(&mask, &depth);
+        let cells = ImageSize::new(19, 12);
+        assert_eq!(completion.cells, cells);
+        for cy in 0..cells.height {
+            for cx in 0..cells.width {
+                let (mut set, mut nearest) = (false, 0.0f32);
+                for y in (CELL_PX * cy)..(CELL_PX * cy + CELL_PX).min(size.height) {
+                    for x in (CELL_PX * cx)..(CELL_PX * cx + CELL_PX).min(size.width) {
+                        set |= mask.get(x, y) != 0;
+                        let z = depth.get(x, y);
+                        if z > 0.0 && (nearest == 0.0 || z < nearest) {
+                            nearest = z;
+                        }
+                    }
+                }
+                let c = cy * cells.width + cx;
+                assert_eq!(completion.set[c], set, "cell ({cx}, {cy})");
+                assert_eq!(completion.depth_m[c], nearest, "cell ({cx}, {cy})");
+            }
+        }
+        // Every output pixel, partial cells included, is its cell's state.
+        let mut out = Mask::filled(size, 7);
+        completion.complete(&mask, &depth, &mut out).unwrap();
+        for y in 0..size.height {
+            for x in 0..size.width {
+                let set = completion.set[(y / CELL_PX) * cells.width + x / CELL_PX];
+                assert_eq!(out.get(x, y), if set { MASK_SET } else { 0 }, "({x}, {y})");
+            }
+        }
     }
 }

@@ -960,6 +960,14 @@ impl DvoTracker {
         self.estimator.config()
     }
 
+    /// Forgets the last motion, so the next [`Self::track`] has no constant-velocity prediction
+    /// (no [`DvoConfig::motion_prior`], no [`DvoConfig::init_from_previous_motion`]): for the
+    /// caller to call when that motion was not trusted or the next estimate spans more than
+    /// one frame interval (frames skipped in between).
+    pub fn forget_motion(&mut self) {
+        self.previous_motion = None;
+    }
+
     /// Forgets the reference frame (the next [`Self::track`] returns `None`) and the motion prior.
     pub fn reset(&mut self) {
         self.has_reference = false;

@@ -911,7 +911,12 @@ impl Processor {
                 }
             }
         }
-        if let MotionSource::Dvo { .. } = self.source {
+        if let MotionSource::Dvo { tracker, .. } = &mut self.source {
+            // The tracker's constant-velocity prediction holds only for an accepted estimate
+            // over one frame interval.
+            if no_depth || no_texture || stats.outcome != PoseOutcome::Tracked || self.dvo_skipped > 0 {
+                tracker.forget_motion();
+            }
             if no_depth || no_texture {
                 self.dvo_skipped = self.dvo_skipped.saturating_add(1);
             } else {
