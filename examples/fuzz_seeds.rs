@@ -11,11 +11,15 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use occmask::convert::write_synthetic_rig_recording;
 use occmask::geometry::camera::presets;
+use occmask::geometry::distortion::CameraModel;
 use occmask::image_buf::{ImageSize, Mask, Rgb8, MASK_SET};
 use occmask::mcap_io::codec::{self, ColorFormat};
-use occmask::mcap_io::input::{json, ros2};
+use occmask::mcap_io::input::{json, pixels, ros2};
+use occmask::mcap_io::ros_out::{self, RosImage, RosTransform, RosVersion};
 use occmask::mcap_io::{Compression, McapWriteOptions, RgbdMcapWriter};
+use occmask::synthetic::{RgbdRig, Scenario, SequenceConfig, SyntheticSequence};
 use occmask::trajectory::{to_tum_text, tum_line, StampedPose};
 use prost::bytes::Bytes;
 use prost::Message as _;
@@ -203,7 +207,7 @@ fn proto_seeds(out: &Path) -> Result<()> {
         "compressed-depth",
         &with_selector(1, &depth_png.encode_to_vec()),
     )?;
-    let calibration = codec::camera_calibration(STAMP_NS, "cam", &presets::TUM_FR2, SIZE)?;
+    let calibration = codec::camera_calibration(STAMP_NS, "cam", &presets::TUM_FR2, SIZE, None)?;
     write(out, "proto_calibration", "fr2", &calibration.encode_to_vec())?;
     Ok(())
 }
@@ -492,7 +496,7 @@ fn protobuf_file(compression: Compression) -> Result<Vec<u8>> {
     let png = Bytes::from(png(&rgb())?);
     for i in 0..3u64 {
         let t = STAMP_NS + i * 33_000_000;
-        w.write_camera_info("/camera/color/camera_info", t, &presets::TUM_FR2, SIZE)?;
+        w.write_camera_info("/camera/color/camera_info", t, &presets::TUM_FR2, SIZE, None)?;
         w.write_color_compressed("/camera/color/image", t, png.clone(), ColorFormat::Png)?;
         w.write_depth_u16("/camera/depth/image", t, &depth_u16(), SIZE, 5000.0)?;
         w.write_pose("/groundtruth/pose", t, &pose(i))?;
@@ -586,6 +590,87 @@ fn file_seeds(out: &Path) -> Result<()> {
         &plain[..plain.len() * 3 / 4],
     )?;
     write(out, "mcap_file", "ros2.mcap", &ros2_file()?)?;
+    // A ROS 1 recording of the synthetic RealSense-like rig: depth from another camera,
+    // distorted colour, /tf_static (what `process` registers and undistorts).
+    let config = SequenceConfig {
+        size: SIZE,
+        frame_count: Some(2),
+        ..SequenceConfig::default()
+    };
+    let sequence = SyntheticSequence::new(Scenario::SmallObjectCrossing, config);
+    let rig = write_synthetic_rig_recording(
+        &sequence,
+        &RgbdRig::realsense_like(&config),
+        RosVersion::Ros1,
+        Cursor::new(Vec::new()),
+        &McapWriteOptions::default(),
+        &mut |_| std::ops::ControlFlow::Continue(()),
+    )?;
+    write(out, "mcap_file", "ros1-rig.mcap", &rig.into_inner())?;
+    Ok(())
+}
+
+/// ROS 1 messages (selector % 6 as in `ros1_messages`) from `ros_out`'s encoders.
+fn ros1_seeds(out: &Path) -> Result<()> {
+    let v = RosVersion::Ros1;
+    let rgb: Vec<u8> = rgb().as_slice().iter().flatten().copied().collect();
+    let image = |encoding, step, data| RosImage {
+        frame_id: "camera_optical",
+        encoding,
+        size: SIZE,
+        step,
+        data,
+    };
+    let depth: Vec<u8> = depth_u16().iter().flat_map(|d| d.to_le_bytes()).collect();
+    let target = "ros1_messages";
+    let encoded = ros_out::encode_image(v, 3, STAMP_NS, &image("rgb8", SIZE.width * 3, &rgb))?;
+    write(out, target, "image-rgb8", &with_selector(0, &encoded))?;
+    let encoded = ros_out::encode_image(v, 3, STAMP_NS, &image("16UC1", SIZE.width * 2, &depth))?;
+    write(out, target, "image-16uc1", &with_selector(0, &encoded))?;
+    let camera = CameraModel {
+        distortion: Some(occmask::geometry::distortion::presets::BONN),
+        ..CameraModel::pinhole(SIZE, presets::BONN)
+    };
+    let encoded = ros_out::encode_camera_info(v, 3, STAMP_NS, "camera_optical", &camera)?;
+    write(out, target, "camera-info-plumb-bob", &with_selector(2, &encoded))?;
+    let encoded = ros_out::encode_pose(v, 3, STAMP_NS, "world", &pose(1))?;
+    write(out, target, "pose-stamped", &with_selector(3, &encoded))?;
+    let tf = [RosTransform {
+        parent: "camera_link",
+        child: "camera_depth_frame",
+        parent_from_child: pose(2),
+    }];
+    let encoded = ros_out::encode_transforms(v, STAMP_NS, &tf)?;
+    write(out, target, "tf-message", &with_selector(5, &encoded))?;
+    Ok(())
+}
+
+/// `field_pixels` inputs: selector (encoding), width, height, step padding, spare, data.
+fn field_pixel_seeds(out: &Path) -> Result<()> {
+    let (w, h) = (SIZE.width as u8, SIZE.height as u8);
+    let packed: Vec<u8> = (0..SIZE.area() * 2).map(|i| (16 + 13 * i) as u8).collect();
+    let mosaic: Vec<u8> = (0..SIZE.area()).map(|i| (40 + 17 * i) as u8).collect();
+    for (selector, name, data) in [
+        (0u8, "uyvy", &packed),
+        (1, "yuyv", &packed),
+        (2, "bayer-rggb", &mosaic),
+    ] {
+        let mut seed = vec![selector, w, h, 0, 0];
+        seed.extend_from_slice(data);
+        write(out, "field_pixels", name, &seed)?;
+    }
+    // compressedDepth rvl: the 12-byte header (format, two quantisation floats), then width,
+    // height and the RVL stream; the selector's first four bytes are part of the header here.
+    let mut rvl = vec![6u8];
+    rvl.extend_from_slice(&[0; 4]);
+    rvl.extend_from_slice(&3000f32.to_le_bytes());
+    rvl.extend_from_slice(&(-0.5f32).to_le_bytes());
+    rvl.extend_from_slice(&(SIZE.width as u32).to_le_bytes());
+    rvl.extend_from_slice(&(SIZE.height as u32).to_le_bytes());
+    rvl.extend(pixels::encode_rvl(&depth_u16()));
+    write(out, "field_pixels", "rvl-16uc1", &rvl)?;
+    rvl[0] = 7;
+    write(out, "field_pixels", "rvl-32fc1", &rvl)?;
     Ok(())
 }
 
@@ -600,6 +685,8 @@ fn main() -> Result<()> {
     pose_seeds(out)?;
     text_seeds(out)?;
     file_seeds(out)?;
+    ros1_seeds(out)?;
+    field_pixel_seeds(out)?;
     println!("seeds written under {}", out.display());
     Ok(())
 }

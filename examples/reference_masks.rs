@@ -53,7 +53,7 @@ fn main() -> Result<()> {
     }
     let dir = dir.context("usage: reference_masks DIR [--bonn] [--camera FX,FY,CX,CY] [--score DIR] [--write DIR] [--overlay DIR]")?;
     let sequence = dataset::tum::load(&dir, DatasetKind::Tum)?;
-    let intrinsics = camera.unwrap_or(if is_bonn {
+    let intrinsics = camera.map(|c| c.intrinsics).unwrap_or(if is_bonn {
         bonn::INTRINSICS
     } else {
         presets::TUM_FR2

@@ -13,7 +13,7 @@ seconds=${1:-600}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(proto_image proto_calibration json_messages ros2_image ros2_camera_info poses text_parsers mcap_file)
+    targets=(proto_image proto_calibration json_messages ros2_image ros2_camera_info ros1_messages field_pixels poses text_parsers mcap_file)
 fi
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz
 cargo run --quiet --example fuzz_seeds -- fuzz/corpus

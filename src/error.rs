@@ -98,6 +98,35 @@ pub enum Error {
         message: String,
     },
 
+    /// Depth comes from another camera than colour and cannot be registered to it as given.
+    #[error("depth {depth_topic} is not registered to colour {color_topic} ({found}): {needed}")]
+    DepthNotRegistered {
+        /// The depth topic.
+        depth_topic: String,
+        /// The colour topic.
+        color_topic: String,
+        /// How depth and colour differ.
+        found: String,
+        /// What registering needs and the flags that give it.
+        needed: String,
+    },
+
+    /// No transform between the depth camera's and the colour camera's frames.
+    #[error(
+        "no transform from the depth frame {depth_frame:?} to the colour frame {color_frame:?} \
+         ({searched}); pass --depth-to-color X,Y,Z,QX,QY,QZ,QW (the depth camera's pose in the \
+         colour camera's frame: translation in metres, then the rotation quaternion), or \
+         --depth-aligned if the depth is already registered to colour"
+    )]
+    MissingTransform {
+        /// The depth image's `frame_id`.
+        depth_frame: String,
+        /// The colour image's `frame_id`.
+        color_frame: String,
+        /// Which channels were searched and which frames they hold.
+        searched: String,
+    },
+
     /// The MCAP library reported an error.
     #[error("MCAP: {0}")]
     Mcap(#[from] mcap::McapError),

@@ -3,7 +3,8 @@
 //!
 //! Layers, each depending only on those above it in this list:
 //! 1. core types and math: [`error`], [`image_buf`], [`time`], [`geometry`], [`trajectory`];
-//! 2. pure algorithms (no files, no MCAP, no printing): pyramid, dvo, occlusion, metrics, synthetic;
+//! 2. pure algorithms (no files, no MCAP, no printing): pyramid, dvo, occlusion, metrics,
+//!    registration (undistortion and depth registration), synthetic;
 //! 3. I/O adapters: dataset readers, MCAP reading and writing;
 //! 4. the per-sequence pipeline, and its scoring on synthetic scenarios ([`scenario_eval`]);
 //! 5. the command-line interface (in the binary).
@@ -23,6 +24,7 @@ pub mod occlusion;
 pub mod pipeline;
 pub mod process;
 pub mod pyramid;
+pub mod registration;
 pub mod scenario_eval;
 pub(crate) mod serde_util;
 pub mod synthetic;

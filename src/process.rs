@@ -28,6 +28,7 @@ use nalgebra::Isometry3;
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
+use crate::geometry::distortion::{CameraModel, LensDistortion};
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
 use crate::mcap_io::annotate::{
     moving_pixels, AnnotateOptions, AnnotatedWriter, FrameAnnotation, FrameStatsMsg, JsonTime,
@@ -35,9 +36,10 @@ use crate::mcap_io::annotate::{
 };
 use crate::mcap_io::input::decode::{
     decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into, read_poses,
+    CalibrationMsg,
 };
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
-use crate::mcap_io::input::{McapInput, RawMessage, Truncation};
+use crate::mcap_io::input::{InputChannel, McapInput, RawMessage, Truncation};
 use crate::mcap_io::DEPTH_UNITS_KEY;
 use crate::pipeline::offline::OfflineProcessor;
 use crate::pipeline::{
@@ -48,7 +50,9 @@ use crate::trajectory::{interpolate, StampedPose};
 
 pub mod batch;
 mod queue;
+pub mod rectify;
 use queue::{byte_queue, ByteReceiver, ByteSender};
+use rectify::{plan_geometry, GeometryOptions, InputGeometry, Publisher, Rectifier, StreamInfo};
 
 /// Where camera poses come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -205,6 +209,10 @@ pub struct ProcessConfig {
     pub topics: TopicOverrides,
     /// `--camera`: overrides the calibration topic.
     pub intrinsics: Option<PinholeIntrinsics>,
+    /// With [`Self::intrinsics`]: the lens distortion of the `--camera` value.
+    pub camera_distortion: Option<LensDistortion>,
+    /// Depth registration and undistortion choices ([`rectify`]).
+    pub geometry: GeometryOptions,
     /// `--depth-units-per-meter`: overrides channel metadata and the millimetre default.
     pub depth_units_per_meter: Option<f64>,
     /// Pose source.
@@ -237,6 +245,8 @@ impl Default for ProcessConfig {
         Self {
             topics: TopicOverrides::default(),
             intrinsics: None,
+            camera_distortion: None,
+            geometry: GeometryOptions::default(),
             depth_units_per_meter: None,
             pose_mode: PoseMode::Dvo,
             pose_child_frame: None,
@@ -257,8 +267,11 @@ impl Default for ProcessConfig {
 pub struct ProcessReport {
     /// The channels used.
     pub topics: RgbdTopics,
-    /// Intrinsics used.
+    /// Intrinsics of the images the pipeline saw (the colour camera's K, magnified when its
+    /// lens was undistorted; see [`rectify::InputGeometry::pipeline`]).
     pub intrinsics: PinholeIntrinsics,
+    /// What was done to the images before the pipeline (registration, undistortion).
+    pub geometry: InputGeometry,
     /// Depth units per metre used for 16-bit depth.
     pub depth_units_per_meter: f64,
     /// Colour messages read.
@@ -326,6 +339,10 @@ pub struct LoopTimings {
     pub loop_s: f64,
     /// In the pipeline ([`FrameProcessor::process`]: DVO + detector).
     pub pipeline_s: f64,
+    /// Undistorting and registering the images of the processed frames ([`rectify::Rectifier`],
+    /// on the prefetch thread, beside the pipeline) and mapping their masks back (on the frame
+    /// loop's thread, after the pipeline).
+    pub rectify_s: f64,
     /// Waiting for the prefetch thread (reading, decompression, image decoding).
     pub input_wait_s: f64,
     /// Waiting for room in the writer thread's queue (encoding, compression, disk).
@@ -369,6 +386,8 @@ struct Queued {
     frame_id: String,
     pixels: Pixels,
     decode_ms: f64,
+    /// Seconds of it spent undistorting and registering.
+    rectify_s: f64,
 }
 
 /// Processed image buffers on their way back to the prefetch thread.
@@ -618,6 +637,58 @@ fn missing_calibration(input: &McapInput, topics: &RgbdTopics, why: &str) -> Err
     }
 }
 
+/// The first message of a calibration channel, decoded.
+fn first_calibration(
+    input: &McapInput,
+    topics: &RgbdTopics,
+    channel: &InputChannel,
+) -> Result<CalibrationMsg> {
+    let first = input
+        .first_message(channel.id)?
+        .ok_or_else(|| missing_calibration(input, topics, &format!("{} has no messages", channel.topic)))?;
+    let ct = channel
+        .channel_type
+        .ok_or_else(|| missing_calibration(input, topics, "unsupported schema"))?;
+    decode_calibration(ct, &channel.topic, &first.data).map_err(|e| at_message(e, &first.header))
+}
+
+/// `frame_id` and size of the first image of a colour (`is_color`) or depth channel: what
+/// [`plan_geometry`] needs before the first frame.
+fn first_image_info(
+    input: &McapInput,
+    channel: &InputChannel,
+    is_color: bool,
+    depth_units_per_meter: f64,
+) -> Result<StreamInfo> {
+    let ct = channel.channel_type.ok_or_else(|| Error::Decode {
+        topic: channel.topic.clone(),
+        message: "unsupported schema".into(),
+    })?;
+    let Some(first) = input.first_message(channel.id)? else {
+        return Ok(StreamInfo {
+            frame_id: String::new(),
+            size: ImageSize::default(),
+        });
+    };
+    let decode = || -> Result<StreamInfo> {
+        let msg = decode_image(ct, &channel.topic, &first.data)?;
+        let size = if is_color {
+            let mut gray = GrayF32::filled(ImageSize::default(), 0.0);
+            gray_from_image_into(&msg, &channel.topic, &mut gray)?;
+            gray.size()
+        } else {
+            let mut depth = DepthMeters::filled(ImageSize::default(), 0.0);
+            depth_from_image_into(&msg, &channel.topic, depth_units_per_meter, &mut depth)?;
+            depth.size()
+        };
+        Ok(StreamInfo {
+            frame_id: msg.frame_id,
+            size,
+        })
+    };
+    decode().map_err(|e| at_message(e, &first.header))
+}
+
 fn load_external_poses(
     input: &McapInput,
     topics: &RgbdTopics,
@@ -744,17 +815,21 @@ pub fn process_file<W: Write + Seek + Send>(
     let topics = detect_topics(input, &topics_override)?;
 
     // Calibration: the flag, else the first message of the calibration channel.
-    let (intrinsics, calibration_size) = match (config.intrinsics, &topics.calibration) {
-        (Some(k), _) => (k, None),
-        (None, Some(channel)) => {
-            let first = input.first_message(channel.id)?.ok_or_else(|| {
-                missing_calibration(input, &topics, &format!("{} has no messages", channel.topic))
-            })?;
-            let ct = channel
-                .channel_type
-                .ok_or_else(|| missing_calibration(input, &topics, "unsupported schema"))?;
-            let calibration = decode_calibration(ct, &channel.topic, &first.data)?;
-            (calibration.intrinsics(&channel.topic)?, Some(calibration.size))
+    let color_calibration = match &topics.calibration {
+        Some(channel) => Some(first_calibration(input, &topics, channel)?),
+        None => None,
+    };
+    let (intrinsics, distortion, calibration_size) = match (config.intrinsics, &color_calibration) {
+        (Some(k), _) => (k, config.camera_distortion, None),
+        (None, Some(calibration)) => {
+            let topic = topics.calibration.as_ref().map_or("", |c| c.topic.as_str());
+            let distortion = if config.geometry.no_undistort {
+                // Reported, not used: an unsupported model is no error then.
+                calibration.distortion(topic).ok().flatten()
+            } else {
+                calibration.distortion(topic)?
+            };
+            (calibration.intrinsics(topic)?, distortion, Some(calibration.size))
         }
         (None, None) => {
             return Err(missing_calibration(
@@ -763,6 +838,10 @@ pub fn process_file<W: Write + Seek + Send>(
                 "the file has no CameraCalibration/CameraInfo channel",
             ))
         }
+    };
+    let depth_calibration = match &topics.depth_calibration {
+        Some(channel) => Some(first_calibration(input, &topics, channel)?),
+        None => None,
     };
     let depth_units_per_meter = match config.depth_units_per_meter {
         Some(u) => u,
@@ -782,6 +861,23 @@ pub fn process_file<W: Write + Seek + Send>(
             None => DEFAULT_DEPTH_UNITS_PER_METER,
         },
     };
+    let color_stream = first_image_info(input, &topics.color, true, depth_units_per_meter)?;
+    let depth_stream = first_image_info(input, &topics.depth, false, depth_units_per_meter)?;
+    let geometry = plan_geometry(
+        input,
+        &topics,
+        &color_stream,
+        &depth_stream,
+        CameraModel {
+            size: color_stream.size,
+            intrinsics,
+            distortion,
+        },
+        color_calibration.as_ref(),
+        depth_calibration.as_ref(),
+        &config.geometry,
+    )?;
+    let (rectifier, publisher) = Rectifier::new(&geometry)?;
     let external_poses = if config.pose_mode == PoseMode::External {
         load_external_poses(input, &topics, config)?
     } else {
@@ -816,6 +912,7 @@ pub fn process_file<W: Write + Seek + Send>(
             })?,
         ),
     ]);
+    metadata.extend(geometry.metadata());
     if let Some((topic, _)) = &anchor_poses {
         metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), topic.clone());
     }
@@ -860,13 +957,14 @@ pub fn process_file<W: Write + Seek + Send>(
         gray: GrayF32::filled(ImageSize::new(0, 0), 0.0),
         depth_m: DepthMeters::filled(ImageSize::new(0, 0), 0.0),
         recycle: (gray_tx, depth_tx),
+        publisher,
         processor: None,
         world_from_odometry: None,
-        frame_size: None,
         first_color_ns: None,
         report: ProcessReport {
             topics: topics.clone(),
-            intrinsics,
+            intrinsics: geometry.pipeline.intrinsics,
+            geometry: geometry.clone(),
             depth_units_per_meter,
             color_messages: 0,
             depth_messages: 0,
@@ -889,55 +987,62 @@ pub fn process_file<W: Write + Seek + Send>(
     let ctx = FrameContext {
         config,
         topics: &topics,
-        intrinsics,
+        // The pipeline sees the undistorted pinhole camera (its K when the lens was undistorted
+        // into a magnified K; see rectify::inscribed_pinhole).
+        intrinsics: geometry.pipeline.intrinsics,
         calibration_size,
         external_poses: &external_poses,
         anchor_poses: anchor_poses.as_ref().map(|(t, p)| (t.as_str(), p.as_slice())),
     };
     // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
     // pipeline and writes: decoding then overlaps with processing.
-    let decode = |m: &RawMessage, pool: &BufferPool| -> Result<Option<(bool, Queued)>> {
-        let id = m.header.channel_id;
-        if id != topics.color.id && id != topics.depth.id {
-            return Ok(None);
-        }
-        let is_color = id == topics.color.id;
-        let start = config.timings.then(Instant::now);
-        let (ct, topic) = if is_color {
-            (color_ct, &topics.color.topic)
-        } else {
-            (depth_ct, &topics.depth.topic)
-        };
-        let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
-            let pixels = if is_color {
-                let mut gray = pool
-                    .gray
-                    .try_recv()
-                    .unwrap_or_else(|_| GrayF32::filled(ImageSize::new(0, 0), 0.0));
-                gray_from_image_into(&msg, topic, &mut gray)?;
-                Pixels::Gray(gray)
+    let decode =
+        |m: &RawMessage, pool: &BufferPool, rectifier: &mut Rectifier| -> Result<Option<(bool, Queued)>> {
+            let id = m.header.channel_id;
+            if id != topics.color.id && id != topics.depth.id {
+                return Ok(None);
+            }
+            let is_color = id == topics.color.id;
+            let start = config.timings.then(Instant::now);
+            let (ct, topic) = if is_color {
+                (color_ct, &topics.color.topic)
             } else {
-                let mut depth = pool
-                    .depth
-                    .try_recv()
-                    .unwrap_or_else(|_| DepthMeters::filled(ImageSize::new(0, 0), 0.0));
-                depth_from_image_into(&msg, topic, depth_units_per_meter, &mut depth)?;
-                Pixels::Depth(depth)
+                (depth_ct, &topics.depth.topic)
             };
-            Ok((msg, pixels))
-        });
-        let (msg, pixels) = decoded.map_err(|e| at_message(e, &m.header))?;
-        Ok(Some((
-            is_color,
-            Queued {
-                log_time_ns: m.header.log_time,
-                timestamp_ns: msg.timestamp_ns,
-                frame_id: msg.frame_id,
-                pixels,
-                decode_ms: start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3),
-            },
-        )))
-    };
+            let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
+                // Decoded, then undistorted and registered for the pipeline.
+                let (pixels, rectify_s) = if is_color {
+                    let mut gray = pool
+                        .gray
+                        .try_recv()
+                        .unwrap_or_else(|_| GrayF32::filled(ImageSize::new(0, 0), 0.0));
+                    let s = rectifier.color(topic, &mut gray, |g| gray_from_image_into(&msg, topic, g))?;
+                    (Pixels::Gray(gray), s)
+                } else {
+                    let mut depth = pool
+                        .depth
+                        .try_recv()
+                        .unwrap_or_else(|_| DepthMeters::filled(ImageSize::new(0, 0), 0.0));
+                    let s = rectifier.depth(topic, &mut depth, |d| {
+                        depth_from_image_into(&msg, topic, depth_units_per_meter, d)
+                    })?;
+                    (Pixels::Depth(depth), s)
+                };
+                Ok((msg, pixels, rectify_s))
+            });
+            let (msg, pixels, rectify_s) = decoded.map_err(|e| at_message(e, &m.header))?;
+            Ok(Some((
+                is_color,
+                Queued {
+                    log_time_ns: m.header.log_time,
+                    timestamp_ns: msg.timestamp_ns,
+                    frame_id: msg.frame_id,
+                    pixels,
+                    decode_ms: start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3),
+                    rectify_s,
+                },
+            )))
+        };
     let loop_start = Instant::now();
     let mut output_wait = std::time::Duration::ZERO;
     let (mut loop_s, mut writer_tail_s) = (0.0, 0.0);
@@ -951,9 +1056,11 @@ pub fn process_file<W: Write + Seek + Send>(
         let (tx, rx) = byte_queue::<Result<Prefetched>>(PREFETCH_BYTES, PREFETCH_MAX_MESSAGES);
         let read_topics = read_topics.as_deref();
         let decode = &decode;
+        let mut rectifier = rectifier;
         scope.spawn(move || {
             let result = input.for_each_message(read_topics, None, |message| {
-                let item = decode(&message, &pool_rx).map(|image| Prefetched { message, image });
+                let item =
+                    decode(&message, &pool_rx, &mut rectifier).map(|image| Prefetched { message, image });
                 let bytes = item.as_ref().map_or(0, Prefetched::bytes);
                 let failed = item.is_err();
                 // A closed channel means the consumer stopped (error or Ctrl-C): stop reading.
@@ -1042,11 +1149,13 @@ struct FrameLoop {
     unanchored: Vec<(InFlight, ProcessedFrame)>,
     gray: GrayF32,
     depth_m: DepthMeters,
+    /// Maps masks back to the published colour pixels (the input side of the registration
+    /// and undistortion runs on the prefetch thread).
+    publisher: Publisher,
     processor: Option<Box<dyn FrameProcessor>>,
     /// Maps the processor's `world` (its first camera) into the output's `world`; set at the
     /// first processed frame ([`OdometryAnchor`]).
     world_from_odometry: Option<Isometry3<f64>>,
-    frame_size: Option<ImageSize>,
     first_color_ns: Option<u64>,
     report: ProcessReport,
     /// Returns processed image buffers to the prefetch thread.
@@ -1150,22 +1259,15 @@ impl FrameLoop {
             None
         };
         let decode_ms = color.decode_ms + depth.decode_ms;
+        let rectify_s = color.rectify_s + depth.rectify_s;
         if let (Pixels::Gray(gray), Pixels::Depth(depth_m)) = (color.pixels, depth.pixels) {
             // The receiver is gone once the prefetch thread has finished: nothing to recycle.
             let _ = self.recycle.0.send(std::mem::replace(&mut self.gray, gray));
             let _ = self.recycle.1.send(std::mem::replace(&mut self.depth_m, depth_m));
         }
+        // The prefetch thread checked both sizes against the first images and rectified depth
+        // into the colour camera.
         let size = self.gray.size();
-        if self.depth_m.size() != size {
-            return Err(Error::SizeMismatch {
-                what: format!(
-                    "depth {} vs colour {} (depth must be registered to the colour camera)",
-                    ctx.topics.depth.topic, ctx.topics.color.topic
-                ),
-                expected: size,
-                found: self.depth_m.size(),
-            });
-        }
         if let Some(cal) = ctx.calibration_size.filter(|c| c.area() > 0 && *c != size) {
             return Err(Error::SizeMismatch {
                 what: format!(
@@ -1175,16 +1277,6 @@ impl FrameLoop {
                 expected: size,
                 found: cal,
             });
-        }
-        match self.frame_size {
-            Some(first) if first != size => {
-                return Err(Error::SizeMismatch {
-                    what: format!("image size changed within {}", ctx.topics.color.topic),
-                    expected: first,
-                    found: size,
-                })
-            }
-            _ => self.frame_size = Some(size),
         }
         let processor = match &mut self.processor {
             Some(p) => p,
@@ -1204,6 +1296,7 @@ impl FrameLoop {
         })?;
         let pipeline_s = pipeline_start.elapsed().as_secs_f64();
         self.report.timings.pipeline_s += pipeline_s;
+        self.report.timings.rectify_s += rectify_s;
         self.report.last_timestamp_ns = Some(stamp);
         self.in_flight.push_back(InFlight {
             log_time_ns: color.log_time_ns,
@@ -1226,8 +1319,18 @@ impl FrameLoop {
         ctx: &FrameContext<'_>,
         output: &OutputQueue,
         hooks: &mut dyn ProcessHooks,
-        result: ProcessedFrame,
+        mut result: ProcessedFrame,
     ) -> Result<()> {
+        if !self.publisher.is_identity() {
+            // Back from the pipeline's undistorted pixels to the published colour image's.
+            let back_start = Instant::now();
+            result.mask = self.publisher.to_published(result.mask)?;
+            result.accumulation = result
+                .accumulation
+                .map(|a| self.publisher.to_published(a))
+                .transpose()?;
+            self.report.timings.rectify_s += back_start.elapsed().as_secs_f64();
+        }
         let frame = self
             .in_flight
             .pop_front()
@@ -1372,10 +1475,13 @@ enum Pipeline {
 }
 
 /// Choices of [`PipelineProcessor`] beyond the pose mode and the processor configuration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PipelineOptions {
     /// Copy the accumulation map into every [`ProcessedFrame`] (`--accumulation`).
     pub keep_accumulation: bool,
+    /// [`PoseMode::External`]: the marker's pose in the camera frame, for poses of a
+    /// motion-capture marker that is not at the optical centre (`--camera-from-marker`).
+    pub camera_from_marker: Option<Isometry3<f64>>,
 }
 
 impl PipelineProcessor {
@@ -1395,7 +1501,7 @@ impl PipelineProcessor {
             PoseMode::Dvo => PoseSource::DvoClosedLoop,
             PoseMode::DvoUnmasked => PoseSource::DvoUnmasked,
             PoseMode::External => PoseSource::External {
-                camera_from_marker: None,
+                camera_from_marker: options.camera_from_marker,
             },
         };
         let config = ProcessorConfig {

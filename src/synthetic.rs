@@ -41,6 +41,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use crate::geometry::camera::presets::KINECT_DEFAULT;
+use crate::geometry::distortion::{presets as lens_presets, CameraModel, LensDistortion};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{gray_from_rgb8_into, DepthMeters, GrayF32, Image, ImageSize, Mask, Rgb8, MASK_SET};
 
@@ -1061,11 +1062,28 @@ impl SyntheticSequence {
         world_from_camera: &Isometry3<f64>,
         frame: &mut SyntheticFrame,
     ) {
-        let size = self.config.size;
+        let camera = CameraModel::pinhole(self.config.size, self.config.intrinsics());
+        self.render_camera_into(index, t_s, world_from_camera, &camera, true, frame);
+    }
+
+    /// [`Self::render_view_into`] through any camera: its size, intrinsics and lens distortion
+    /// (each pixel's rays are undistorted, so a distorted camera's image bends straight
+    /// lines as a real lens does). Without `shade`, colour is not computed (left black): a
+    /// depth camera's view. The depth sensor model uses the camera's fx for its disparity.
+    pub fn render_camera_into(
+        &self,
+        index: usize,
+        t_s: f64,
+        world_from_camera: &Isometry3<f64>,
+        camera: &CameraModel,
+        shade_colour: bool,
+        frame: &mut SyntheticFrame,
+    ) {
+        let size = camera.size;
         if frame.depth_m.size() != size {
             *frame = SyntheticFrame::empty(size);
         }
-        let intrinsics = self.config.intrinsics();
+        let intrinsics = camera.intrinsics;
         frame.index = index;
         frame.timestamp_ns = (t_s * 1e9).round().max(0.0) as u64;
         frame.world_from_camera = *world_from_camera;
@@ -1093,12 +1111,7 @@ impl SyntheticSequence {
             })
             .collect();
         let view = ViewSetup {
-            ray_x: (0..size.width)
-                .map(|x| (x as f64 - intrinsics.cx) / intrinsics.fx)
-                .collect(),
-            ray_y: (0..size.height)
-                .map(|y| (y as f64 - intrinsics.cy) / intrinsics.fy)
-                .collect(),
+            rays: Rays::new(camera),
             world_rotation: world_from_camera.rotation.to_rotation_matrix().into_inner(),
             world_origin: world_from_camera.translation.vector,
             room: self.room,
@@ -1106,7 +1119,6 @@ impl SyntheticSequence {
                 Surface::new(self.room.texture_seed ^ (face as u64 + 1).wrapping_mul(0x51_7cc1_b727))
             }),
             boxes,
-            intrinsics,
         };
         let width = size.width;
         let noise_seed = hash3(self.config.seed, index as u64, 0x5eed);
@@ -1135,10 +1147,21 @@ impl SyntheticSequence {
                 for (row, (((depth_row, rgb_row), mask_row), object_row)) in rows.enumerate() {
                     let y = chunk * ROWS_PER_TASK + row;
                     for x in 0..width {
-                        let hit = view.cast(view.ray_x[x], view.ray_y[y]);
+                        let Some((ray_x, ray_y)) = view.rays.centre(x, y) else {
+                            // No ray (beyond a lens model's fold): nothing is seen there.
+                            depth_row[x] = 0.0;
+                            mask_row[x] = 0;
+                            object_row[x] = 0;
+                            rgb_row[x] = [0; 3];
+                            continue;
+                        };
+                        let hit = view.cast(ray_x, ray_y);
                         depth_row[x] = hit.depth_m as f32;
                         mask_row[x] = if hit.moving { MASK_SET } else { 0 };
                         object_row[x] = hit.object;
+                        if !shade_colour {
+                            continue;
+                        }
                         let pixel_key = (y * width + x) as u64;
                         let rgb = if samples_per_axis <= 1 {
                             shade(hit.surface, hit.u_m, hit.v_m)
@@ -1166,6 +1189,79 @@ impl SyntheticSequence {
             &mut frame.depth_raw,
             &mut frame.depth_m,
         );
+    }
+}
+
+/// Kinect-class lens distortion for synthetic colour cameras: TUM's published freiburg1
+/// calibration (a Kinect v1), whose image corners move by ≈ 9 px at 640×480.
+pub const KINECT_LIKE_DISTORTION: LensDistortion = lens_presets::TUM_FR1;
+
+/// A colour and a depth camera on one rig, for rendering recordings as a driver publishes
+/// them: colour through its lens (distortion), depth from its own camera and pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RgbdRig {
+    /// The colour camera (the ground-truth poses and masks are this camera's).
+    pub color: CameraModel,
+    /// The depth camera.
+    pub depth: CameraModel,
+    /// The depth camera's pose in the colour camera's optical frame.
+    pub color_from_depth: Isometry3<f64>,
+}
+
+impl RgbdRig {
+    /// One pinhole camera for both (what [`SyntheticSequence::render_into`] renders).
+    pub fn registered(config: &SequenceConfig) -> Self {
+        let camera = CameraModel::pinhole(config.size, config.intrinsics());
+        Self {
+            color: camera,
+            depth: camera,
+            color_from_depth: Isometry3::identity(),
+        }
+    }
+
+    /// A RealSense D435-like rig at `config.size` (numbers for 640 columns, scaled with the
+    /// width): colour = the config's camera with [`KINECT_LIKE_DISTORTION`]; depth 848×480
+    /// with fx = fy = 427, (cx, cy) = (425.1, 238.6) and no distortion (the D435's depth is
+    /// rectified), 15 mm to the colour camera's right with a 0.2° rotation, as its factory
+    /// extrinsics are.
+    pub fn realsense_like(config: &SequenceConfig) -> Self {
+        let s = config.size.width as f64 / 640.0;
+        let depth_size = ImageSize::new((848.0 * s).round() as usize, (480.0 * s).round() as usize);
+        Self {
+            color: CameraModel {
+                size: config.size,
+                intrinsics: config.intrinsics(),
+                distortion: Some(KINECT_LIKE_DISTORTION),
+            },
+            depth: CameraModel::pinhole(
+                depth_size,
+                PinholeIntrinsics::new(427.0 * s, 427.0 * s, 425.1 * s, 238.6 * s),
+            ),
+            color_from_depth: Isometry3::new(
+                Vector3::new(0.015, 0.0001, 0.0003),
+                Vector3::new(0.002, -0.003, 0.001),
+            ),
+        }
+    }
+}
+
+impl SyntheticSequence {
+    /// Renders frame `index` through `rig`: `color` gets the colour camera's view (colour,
+    /// grey, ground-truth mask, and the depth along its own rays, which no sensor of the rig
+    /// measures), `depth` the depth camera's (`depth_raw`/`depth_m` with the sensor model; no
+    /// colour). Both at the colour camera's ground-truth pose and time.
+    pub fn render_rig_into(
+        &self,
+        index: usize,
+        rig: &RgbdRig,
+        color: &mut SyntheticFrame,
+        depth: &mut SyntheticFrame,
+    ) {
+        let t_s = self.time_s(index);
+        let world_from_color = self.world_from_camera(index);
+        self.render_camera_into(index, t_s, &world_from_color, &rig.color, true, color);
+        let world_from_depth = world_from_color * rig.color_from_depth;
+        self.render_camera_into(index, t_s, &world_from_depth, &rig.depth, false, depth);
     }
 }
 
@@ -1215,19 +1311,91 @@ struct BoxInCamera {
     faces: [Surface; 6],
 }
 
+/// The camera-frame rays (x, y, 1) of a view's pixels and sub-pixel samples, computed once per
+/// frame.
+enum Rays {
+    /// A pinhole camera: the ray's x depends on the column only, y on the row only.
+    Pinhole {
+        /// (x − cx) / fx of each column.
+        ray_x: Vec<f64>,
+        /// (y − cy) / fy of each row.
+        ray_y: Vec<f64>,
+        intrinsics: PinholeIntrinsics,
+    },
+    /// A distorted camera: the undistorted ray of every pixel centre and every pixel corner
+    /// ((width + 1) × (height + 1), corner (i, j) at pixel position (i − ½, j − ½)); sub-pixel
+    /// rays interpolate the corners (the lens bends a ray by far less than a pixel's width
+    /// within one pixel).
+    Distorted {
+        centres: Vec<Option<(f64, f64)>>,
+        corners: Vec<Option<(f64, f64)>>,
+        width: usize,
+    },
+}
+
+impl Rays {
+    fn new(camera: &CameraModel) -> Self {
+        let (w, h) = (camera.size.width, camera.size.height);
+        let k = camera.intrinsics;
+        if camera.distortion.is_none() {
+            return Rays::Pinhole {
+                ray_x: (0..w).map(|x| (x as f64 - k.cx) / k.fx).collect(),
+                ray_y: (0..h).map(|y| (y as f64 - k.cy) / k.fy).collect(),
+                intrinsics: k,
+            };
+        }
+        let grid = |cols: usize, rows: usize, offset: f64| -> Vec<Option<(f64, f64)>> {
+            (0..rows)
+                .into_par_iter()
+                .flat_map_iter(|y| (0..cols).map(move |x| (x, y)))
+                .map(|(x, y)| camera.ray(x as f64 + offset, y as f64 + offset))
+                .collect()
+        };
+        Rays::Distorted {
+            centres: grid(w, h, 0.0),
+            corners: grid(w + 1, h + 1, -0.5),
+            width: w,
+        }
+    }
+
+    /// The ray of pixel (x, y)'s centre.
+    #[inline]
+    fn centre(&self, x: usize, y: usize) -> Option<(f64, f64)> {
+        match self {
+            Rays::Pinhole { ray_x, ray_y, .. } => Some((ray_x[x], ray_y[y])),
+            Rays::Distorted { centres, width, .. } => centres[y * width + x],
+        }
+    }
+
+    /// The ray through pixel position (x − ½ + s, y − ½ + t), s, t ∈ [0, 1].
+    #[inline]
+    fn sample(&self, x: usize, y: usize, s: f64, t: f64) -> Option<(f64, f64)> {
+        match self {
+            Rays::Pinhole { intrinsics: k, .. } => {
+                let (px, py) = (x as f64 - 0.5 + s, y as f64 - 0.5 + t);
+                Some(((px - k.cx) / k.fx, (py - k.cy) / k.fy))
+            }
+            Rays::Distorted { corners, width, .. } => {
+                let cw = width + 1;
+                let at = |i: usize, j: usize| corners[j * cw + i];
+                let (a, b, c, d) = (at(x, y)?, at(x + 1, y)?, at(x, y + 1)?, at(x + 1, y + 1)?);
+                let lerp = |p: f64, q: f64, f: f64| p + (q - p) * f;
+                let top = (lerp(a.0, b.0, s), lerp(a.1, b.1, s));
+                let bottom = (lerp(c.0, d.0, s), lerp(c.1, d.1, s));
+                Some((lerp(top.0, bottom.0, t), lerp(top.1, bottom.1, t)))
+            }
+        }
+    }
+}
+
 struct ViewSetup {
-    /// Camera-frame ray x component of each image column ((x − cx) / fx), computed once per frame.
-    ray_x: Vec<f64>,
-    /// Camera-frame ray y component of each image row ((y − cy) / fy).
-    ray_y: Vec<f64>,
+    rays: Rays,
     world_rotation: nalgebra::Matrix3<f64>,
     world_origin: Vector3<f64>,
     room: Room,
     /// Texture of each room face, indexed by `2 · axis + (max side)`.
     room_faces: [Surface; 6],
     boxes: Vec<BoxInCamera>,
-    /// Intrinsics of the rendered image (sub-pixel sample rays).
-    intrinsics: PinholeIntrinsics,
 }
 
 /// The first surface hit by a ray.
@@ -1249,24 +1417,29 @@ impl ViewSetup {
     /// unbiased estimate of the pixel's integral whose error is noise, not the view-dependent
     /// moiré of a regular grid).
     fn pixel_colour(&self, x: usize, y: usize, n: usize, jitter_key: u64) -> [f32; 3] {
-        let k = &self.intrinsics;
         let step = 1.0 / n as f64;
         let mut sum = [0.0f32; 3];
+        let mut samples = 0;
         for sy in 0..n {
             for sx in 0..n {
                 let h = hash3(jitter_key, (sy * n + sx) as u64, 0x51);
                 // Two independent 24-bit uniforms from one hash (`unit` reads bits 40..64).
                 let (jx, jy) = (f64::from(unit(h)), f64::from(unit(h << 24)));
-                let px = x as f64 - 0.5 + (sx as f64 + jx) * step;
-                let py = y as f64 - 0.5 + (sy as f64 + jy) * step;
-                let hit = self.cast((px - k.cx) / k.fx, (py - k.cy) / k.fy);
+                let Some((ray_x, ray_y)) =
+                    self.rays
+                        .sample(x, y, (sx as f64 + jx) * step, (sy as f64 + jy) * step)
+                else {
+                    continue;
+                };
+                let hit = self.cast(ray_x, ray_y);
                 let rgb = shade(hit.surface, hit.u_m, hit.v_m);
                 for (s, c) in sum.iter_mut().zip(rgb) {
                     *s += c;
                 }
+                samples += 1;
             }
         }
-        let inv = 1.0 / (n * n) as f32;
+        let inv = 1.0 / samples.max(1) as f32;
         sum.map(|s| s * inv)
     }
 

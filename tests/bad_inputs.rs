@@ -437,9 +437,9 @@ fn process_cases() -> Vec<ProcessCase> {
         },
         ProcessCase {
             name: "colour encoding unknown",
-            bytes: || edit_raw(COLOR_TOPIC, Some(4), |m| m.encoding = "yuv422".into()),
+            bytes: || edit_raw(COLOR_TOPIC, Some(4), |m| m.encoding = "nv12".into()),
             extra: &[],
-            expect: Expect::Fails(&["in.mcap", COLOR_TOPIC, "yuv422"]),
+            expect: Expect::Fails(&["in.mcap", COLOR_TOPIC, "nv12"]),
         },
         ProcessCase {
             name: "depth size differs from colour",

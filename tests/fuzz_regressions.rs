@@ -65,6 +65,16 @@ fn ros2_camera_info_inputs_never_panic() {
 }
 
 #[test]
+fn ros1_message_inputs_never_panic() {
+    assert!(replay("ros1_messages", harness::ros1_messages) > 0);
+}
+
+#[test]
+fn field_pixel_inputs_never_panic() {
+    assert!(replay("field_pixels", harness::field_pixels) > 0);
+}
+
+#[test]
 fn pose_inputs_never_panic() {
     assert!(replay("poses", harness::poses) > 0);
 }

@@ -467,7 +467,7 @@ fn process_cli_marks_a_blackout_in_the_stats_channel() {
         }
         let t = frame.timestamp_ns;
         w.write_color_raw(TOPIC_COLOR_IMAGE, t, &frame.rgb).unwrap();
-        w.write_camera_info(TOPIC_COLOR_CAMERA_INFO, t, &frame.intrinsics, size)
+        w.write_camera_info(TOPIC_COLOR_CAMERA_INFO, t, &frame.intrinsics, size, None)
             .unwrap();
         w.write_depth_u16(
             TOPIC_DEPTH_IMAGE,

@@ -265,3 +265,56 @@ fn external_poses_give_zero_odometry_error() {
     let rmse = v["odometry"]["rpe"][0]["translation_rmse_m"].as_f64().unwrap();
     assert!(rmse < 1e-9, "{v}");
 }
+
+#[test]
+fn camera_from_marker_moves_external_poses_to_the_camera() {
+    use prost::Message as _;
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Ros1);
+    let x = dir.path().join("x.mcap");
+    // The marker 10 cm to the camera's right and turned 90° about its z axis.
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        x.as_os_str(),
+        "--pose-topic".as_ref(),
+        GT_TOPIC.as_ref(),
+        "--camera-from-marker".as_ref(),
+        "0.1,0,0,0,0,0.70710678,0.70710678".as_ref(),
+        "-q".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let bytes = std::fs::read(&x).unwrap();
+    let first = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .find(|m| m.channel.topic == occmask::mcap_io::annotate::TOPIC_ODOMETRY)
+        .unwrap();
+    let pose = foxglove::messages::PoseInFrame::decode(first.data.as_ref()).unwrap();
+    let p = pose.pose.unwrap();
+    let (t, q) = (p.position.unwrap(), p.orientation.unwrap());
+    let odometry = nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(t.x, t.y, t.z),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
+    );
+    let camera_from_marker = nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(0.1, 0.0, 0.0),
+        nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), std::f64::consts::FRAC_PI_2),
+    );
+    let expected = gt_pose(0) * camera_from_marker.inverse();
+    assert!(
+        (odometry.to_homogeneous() - expected.to_homogeneous()).norm() < 1e-6,
+        "{odometry} vs {expected}"
+    );
+    // Without --pose-topic the flag is refused.
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        dir.path().join("y.mcap").as_os_str(),
+        "--camera-from-marker".as_ref(),
+        "bonn".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+}

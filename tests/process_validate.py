@@ -3,7 +3,7 @@
 usage: python process_validate.py FILE FRAMES
 
 Decodes every message: protobuf channels with mcap-protobuf-support, ROS 2 cdr channels with
-mcap-ros2-support, json channels with json.loads. Checks: summary present; log times
+mcap-ros2-support, ROS 1 channels with mcap-ros1-support, json channels with json.loads. Checks: summary present; log times
 non-decreasing; FRAMES messages on /occmask/mask, /occmask/mask_annotations, /occmask/odometry
 and /occmask/stats; masks mono8 0/255 with the colour frame; annotations with translucent fill
 and the mask's stamp; unit quaternions; stats fields of schemas/occmask.FrameStats.json.
@@ -16,6 +16,7 @@ import sys
 
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+from mcap_ros1.decoder import DecoderFactory as Ros1DecoderFactory
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
 
@@ -30,7 +31,7 @@ def ns(ts):
 
 def main():
     path, frames = sys.argv[1], int(sys.argv[2])
-    factories = [ProtobufDecoderFactory(), Ros2DecoderFactory()]
+    factories = [ProtobufDecoderFactory(), Ros2DecoderFactory(), Ros1DecoderFactory()]
     decoders = {}
     counts = {}
     mask_stamps = []

@@ -171,3 +171,101 @@ fn process_outputs_of_every_flavour_pass_doctor_and_the_python_readers() {
         }
     }
 }
+
+/// ROS 1 and ROS 2 recordings from `ros_out` (the synthetic RealSense-like rig) decode with
+/// the Python ROS decoders to what occmask itself reads from them: images, calibrations
+/// (distortion included) and the /tf_static chain from depth to colour.
+#[test]
+fn ros_recordings_decode_alike_in_python_and_occmask() {
+    use occmask::convert::{rig_names, write_synthetic_rig_recording};
+    use occmask::image_buf::ImageSize;
+    use occmask::mcap_io::input::decode::decode_calibration;
+    use occmask::mcap_io::input::transforms::find_transform;
+    use occmask::mcap_io::ros_out::RosVersion;
+    use occmask::synthetic::{RgbdRig, Scenario, SequenceConfig, SyntheticSequence};
+
+    let Some(python) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SequenceConfig {
+        size: ImageSize::new(160, 120),
+        frame_count: Some(2),
+        ..SequenceConfig::default()
+    };
+    let rig = RgbdRig::realsense_like(&config);
+    let sequence = SyntheticSequence::new(Scenario::SmallObjectCrossing, config);
+    for version in [RosVersion::Ros1, RosVersion::Ros2] {
+        let path = dir.path().join(format!("{version:?}.mcap"));
+        let file = BufWriter::new(std::fs::File::create(&path).unwrap());
+        write_synthetic_rig_recording(&sequence, &rig, version, file, &Default::default(), &mut |_| {
+            std::ops::ControlFlow::Continue(())
+        })
+        .unwrap();
+        let out = Command::new(&python)
+            .arg(repo().join("tests").join("validate_ros_recording.py"))
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{version:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let py: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(py["counts"][rig_names::COLOR_IMAGE], 2, "{py}");
+        assert_eq!(py["counts"][rig_names::TF_STATIC], 1, "{py}");
+        assert_eq!(
+            py["images"][rig_names::DEPTH_IMAGE],
+            serde_json::json!(["16UC1", 212, 120, rig_names::DEPTH_FRAME])
+        );
+        assert_eq!(
+            py["images"][rig_names::COLOR_IMAGE],
+            serde_json::json!(["rgb8", 160, 120, rig_names::COLOR_FRAME])
+        );
+
+        // occmask's view of the same calibration.
+        let input = McapInput::open(&path).unwrap();
+        let channel = input.channel_by_topic(rig_names::COLOR_INFO).unwrap();
+        let first = input.first_message(channel.id).unwrap().unwrap();
+        let calibration =
+            decode_calibration(channel.channel_type.unwrap(), rig_names::COLOR_INFO, &first.data).unwrap();
+        let py_cal = &py["calibrations"][rig_names::COLOR_INFO];
+        assert_eq!(py_cal["model"], calibration.distortion_model.as_str());
+        assert_eq!(py_cal["d"], serde_json::json!(calibration.d));
+        assert_eq!(py_cal["k"], serde_json::json!(calibration.k));
+        assert_eq!(
+            calibration.distortion(rig_names::COLOR_INFO).unwrap(),
+            rig.color.distortion
+        );
+
+        // The chain composed from Python's edges equals occmask's lookup and the rig.
+        let edges = py["transforms"].as_array().unwrap();
+        let edge = |parent: &str, child: &str| -> nalgebra::Isometry3<f64> {
+            let e = edges
+                .iter()
+                .find(|e| e[0] == parent && e[1] == child)
+                .unwrap_or_else(|| panic!("no edge {parent} -> {child} in {edges:?}"));
+            let v = |i: usize, j: usize| e[i][j].as_f64().unwrap();
+            nalgebra::Isometry3::from_parts(
+                nalgebra::Translation3::new(v(2, 0), v(2, 1), v(2, 2)),
+                nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    v(3, 3),
+                    v(3, 0),
+                    v(3, 1),
+                    v(3, 2),
+                )),
+            )
+        };
+        let link_from_color =
+            edge("camera_link", "camera_color_frame") * edge("camera_color_frame", rig_names::COLOR_FRAME);
+        let link_from_depth =
+            edge("camera_link", "camera_depth_frame") * edge("camera_depth_frame", rig_names::DEPTH_FRAME);
+        let python_chain = link_from_color.inverse() * link_from_depth;
+        let (chain, _) = find_transform(&input, rig_names::COLOR_FRAME, rig_names::DEPTH_FRAME).unwrap();
+        let ours = chain.unwrap().target_from_source;
+        let gap = |a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>| {
+            (a.to_homogeneous() - b.to_homogeneous()).norm()
+        };
+        assert!(gap(&python_chain, &ours) < 1e-12, "{version:?}");
+        assert!(gap(&ours, &rig.color_from_depth) < 1e-12, "{version:?}");
+    }
+}

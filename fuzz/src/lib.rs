@@ -11,14 +11,17 @@
 use std::path::Path;
 
 use occmask::dataset;
+use occmask::geometry::distortion::CameraModel;
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
 use occmask::mcap_io::codec::{self, Decoded};
 use occmask::mcap_io::input::decode::{
     decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
+    CalibrationMsg, ImageMsg, ImagePayload,
 };
 use occmask::mcap_io::input::detect::{describe_channels, detect_topics, TopicOverrides};
 use occmask::mcap_io::input::{ChannelType, Flavor, McapInput, MessageType};
 use occmask::mcap_io::McapFileReader;
+use occmask::registration;
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{parse_tum_line, tum_line};
 
@@ -105,13 +108,66 @@ pub fn proto_image(data: &[u8]) {
     codec_decode(schema, msg);
 }
 
+/// Images at most this many pixels wide and tall are built from fuzzed calibrations (keeps
+/// each execution short; the tables' cost is linear in the pixels).
+const MAX_FUZZ_SIDE: usize = 48;
+
+/// A decoded calibration through K validation, the distortion model and, for small images,
+/// the undistortion tables `process` builds from it (Newton inversion of arbitrary
+/// coefficients must stay finite or be refused, never panic or hang).
+fn calibration_checks(c: &CalibrationMsg) {
+    if let Ok(k) = c.intrinsics(TOPIC) {
+        assert!(k.is_valid(), "accepted intrinsics must be valid: {k:?}");
+    }
+    let Ok(camera) = c.camera_model(TOPIC) else {
+        return;
+    };
+    let size = ImageSize::new(
+        camera.size.width.clamp(2, MAX_FUZZ_SIDE),
+        camera.size.height.clamp(2, MAX_FUZZ_SIDE),
+    );
+    let camera = CameraModel { size, ..camera };
+    let pinhole = registration::inscribed_pinhole(&camera);
+    assert!(pinhole.intrinsics.is_valid(), "{pinhole:?}");
+    if let (Ok(to_pinhole), Ok(back)) = (
+        registration::undistortion_map(&camera, &pinhole),
+        registration::distortion_map(&camera, &pinhole),
+    ) {
+        let gray = GrayF32::from_fn(size, |x, y| ((x + y) % 7) as f32 / 7.0);
+        let mut out = GrayF32::filled(size, 0.0);
+        if to_pinhole.apply_into(&gray, &mut out).is_ok() {
+            assert!(
+                out.as_slice().iter().all(|v| (0.0..=1.0).contains(v)),
+                "remapped gray outside 0..1"
+            );
+        }
+        let mask = occmask::image_buf::Mask::filled(size, 255);
+        let mut published = occmask::image_buf::Mask::filled(size, 0);
+        let _ = back.apply_into(&mask, &mut published);
+    }
+    // Registration from this camera into a fixed pinhole one, 2 cm away.
+    let target = CameraModel::pinhole(
+        size,
+        occmask::geometry::PinholeIntrinsics::new(40.0, 40.0, 23.5, 23.5),
+    );
+    let color_from_depth = nalgebra::Isometry3::translation(0.02, 0.0, 0.0);
+    if let Ok(mut r) = registration::DepthRegistration::new(&camera, &target, &color_from_depth, 1) {
+        let depth = DepthMeters::from_fn(size, |x, y| 0.5 + ((x * 3 + y) % 11) as f32 * 0.3);
+        let mut out = DepthMeters::filled(size, 0.0);
+        if r.register_into(&depth, &mut out).is_ok() {
+            assert!(
+                out.as_slice().iter().all(|v| v.is_finite() && *v >= 0.0),
+                "registered depth"
+            );
+        }
+    }
+}
+
 /// Foxglove protobuf `CameraCalibration` through both decoders and the K validation.
 pub fn proto_calibration(data: &[u8]) {
     let ct = channel(Flavor::FoxgloveProtobuf, MessageType::Calibration);
     if let Ok(c) = decode_calibration(ct, TOPIC, data) {
-        if let Ok(k) = c.intrinsics(TOPIC) {
-            assert!(k.is_valid(), "accepted intrinsics must be valid: {k:?}");
-        }
+        calibration_checks(&c);
     }
     codec_decode("foxglove.CameraCalibration", data);
 }
@@ -127,7 +183,7 @@ pub fn json_messages(data: &[u8]) {
         _ => {
             let ct = channel(Flavor::FoxgloveJson, MessageType::Calibration);
             if let Ok(c) = decode_calibration(ct, TOPIC, msg) {
-                let _ = c.intrinsics(TOPIC);
+                calibration_checks(&c);
             }
         }
     }
@@ -150,7 +206,108 @@ pub fn ros2_image(data: &[u8]) {
 pub fn ros2_camera_info(data: &[u8]) {
     let ct = channel(Flavor::Ros2Cdr, MessageType::Calibration);
     if let Ok(c) = decode_calibration(ct, TOPIC, data) {
-        let _ = c.intrinsics(TOPIC);
+        calibration_checks(&c);
+    }
+}
+
+/// ROS 1 messages (selector % 6): `Image`, `CompressedImage` (through both pixel
+/// conversions), `CameraInfo` (through the calibration checks), `PoseStamped`,
+/// `TransformStamped`, `TFMessage`.
+pub fn ros1_messages(data: &[u8]) {
+    let Some((selector, msg)) = split(data) else {
+        return;
+    };
+    let ct = |message| channel(Flavor::Ros1, message);
+    match selector % 6 {
+        0 => image_and_pixels(ct(MessageType::RawImage), msg),
+        1 => image_and_pixels(ct(MessageType::CompressedImage), msg),
+        2 => {
+            if let Ok(c) = decode_calibration(ct(MessageType::Calibration), TOPIC, msg) {
+                calibration_checks(&c);
+            }
+        }
+        k => {
+            let message = [
+                MessageType::PoseInFrame,
+                MessageType::FrameTransform,
+                MessageType::FrameTransforms,
+            ][usize::from(k - 3)];
+            if let Ok(samples) = decode_poses(ct(message), TOPIC, msg) {
+                for s in samples {
+                    assert!(s
+                        .parent_from_child
+                        .translation
+                        .vector
+                        .iter()
+                        .all(|v| v.is_finite()));
+                }
+            }
+        }
+    }
+}
+
+/// Encodings of the field decoded straight from the pixel bytes: the selector picks the
+/// encoding (packed YUV 4:2:2 both orders, the four 8-bit Bayer patterns, compressedDepth
+/// RVL 16UC1 / 32FC1, compressedDepth PNG 32FC1), the next four bytes width, height (the
+/// low byte each; `step` = the natural row size plus the third byte's low two bits) and the
+/// rest are the data; both pixel conversions run.
+pub fn field_pixels(data: &[u8]) {
+    const RAW: [&str; 6] = [
+        "yuv422",
+        "yuv422_yuy2",
+        "bayer_rggb8",
+        "bayer_bggr8",
+        "bayer_gbrg8",
+        "bayer_grbg8",
+    ];
+    const COMPRESSED: [&str; 3] = [
+        "16UC1; compressedDepth rvl",
+        "32FC1; compressedDepth rvl",
+        "32FC1; compressedDepth png",
+    ];
+    let Some((&selector, rest)) = data.split_first() else {
+        return;
+    };
+    let Some((dims, bytes)) = rest.split_first_chunk::<4>() else {
+        return;
+    };
+    let choice = usize::from(selector) % (RAW.len() + COMPRESSED.len());
+    let payload = match RAW.get(choice) {
+        Some(encoding) => {
+            let (width, height) = (u32::from(dims[0]), u32::from(dims[1]));
+            let bpp = if choice < 2 { 2 } else { 1 };
+            ImagePayload::Raw {
+                width,
+                height,
+                encoding: (*encoding).to_owned(),
+                step: width * bpp + u32::from(dims[2] & 3),
+                big_endian: false,
+                data: bytes.to_vec(),
+            }
+        }
+        None => ImagePayload::Compressed {
+            format: COMPRESSED[choice - RAW.len()].to_owned(),
+            data: rest.to_vec(),
+        },
+    };
+    let msg = ImageMsg {
+        timestamp_ns: 1,
+        frame_id: "cam".into(),
+        payload,
+    };
+    let mut gray = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+    if gray_from_image_into(&msg, TOPIC, &mut gray).is_ok() {
+        assert!(
+            gray.as_slice().iter().all(|v| (0.0..=1.0).contains(v)),
+            "gray outside 0..1"
+        );
+    }
+    let mut depth = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
+    if depth_from_image_into(&msg, TOPIC, UNITS_PER_METER, &mut depth).is_ok() {
+        assert!(
+            depth.as_slice().iter().all(|v| v.is_finite() && *v >= 0.0),
+            "depth"
+        );
     }
 }
 
@@ -214,7 +371,7 @@ pub fn text_parsers(data: &[u8]) {
         }
         2 => {
             if let Ok(k) = dataset::parse_camera(&text) {
-                assert!(k.is_valid());
+                assert!(k.intrinsics.is_valid());
             }
         }
         3 => {
@@ -268,7 +425,7 @@ pub fn mcap_file(data: &[u8], scratch: &Path) {
             } else if ct.is_pose() {
                 let _ = decode_poses(ct, TOPIC, &first.data);
             } else if let Ok(c) = decode_calibration(ct, TOPIC, &first.data) {
-                let _ = c.intrinsics(TOPIC);
+                calibration_checks(&c);
             }
         }
         let mut visited = 0;

@@ -2,6 +2,7 @@
 //! command's clap struct, so flag names, defaults and help stay the same everywhere).
 
 use clap::{Args as ClapArgs, ValueEnum};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 use occmask::dataset;
 use occmask::mcap_io::writer::{
@@ -61,6 +62,38 @@ pub fn parse_camera_arg(text: &str) -> Result<String, String> {
     dataset::parse_camera(text)
         .map(|_| text.to_owned())
         .map_err(|e| e.to_string())
+}
+
+/// A rigid transform `X,Y,Z,QX,QY,QZ,QW`: translation in metres, then a unit quaternion
+/// (`--depth-to-color`, `--camera-from-marker`), or a preset name
+/// ([`dataset::camera_from_marker_preset`]), checked at parse time.
+pub fn parse_pose(text: &str) -> Result<Isometry3<f64>, String> {
+    // Hand-typed quaternions carry 4–6 digits; anything further from unit length is a typo.
+    const MAX_QUATERNION_NORM_ERROR: f64 = 1e-3;
+    let bad =
+        |why: &str| format!("expected X,Y,Z,QX,QY,QZ,QW (metres, unit quaternion), found {text:?}: {why}");
+    let values: Vec<f64> = match dataset::camera_from_marker_preset(text) {
+        Some(preset) => preset.to_vec(),
+        None => text
+            .split(',')
+            .map(|v| v.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| bad("not 7 numbers"))?,
+    };
+    let [x, y, z, qx, qy, qz, qw] = values[..] else {
+        return Err(bad(&format!("{} numbers", values.len())));
+    };
+    if !values.iter().all(|v| v.is_finite()) {
+        return Err(bad("not finite"));
+    }
+    let q = Quaternion::new(qw, qx, qy, qz);
+    if (q.norm() - 1.0).abs() > MAX_QUATERNION_NORM_ERROR {
+        return Err(bad(&format!("the quaternion's norm is {}", q.norm())));
+    }
+    Ok(Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_quaternion(q),
+    ))
 }
 
 /// A finite number > 0.
@@ -173,5 +206,12 @@ mod tests {
         assert!(parse_pair_gap_ms("-1").is_err() && parse_pair_gap_ms("nan").is_err());
         assert_eq!(parse_chunk_size_mib("1024"), Ok(1024.0));
         assert!(parse_chunk_size_mib("1e300").is_err() && parse_chunk_size_mib("0").is_err());
+        let pose = parse_pose("0.015, 0, 0, 0, 0, 0.7071068, 0.7071068").unwrap();
+        assert!((pose.translation.vector.x - 0.015).abs() < 1e-12);
+        assert!((pose.rotation.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
+        assert!(parse_pose("bonn").is_ok());
+        for bad in ["1,2,3", "0,0,0,0,0,0,2", "0,0,0,0,0,0,nan", "a,0,0,0,0,0,1"] {
+            assert!(parse_pose(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -19,6 +19,7 @@ use occmask::mcap_io::AtomicOutput;
 use occmask::occlusion::AppearanceGrowthConfig;
 use occmask::pipeline::{ProcessingMode, ProcessorConfig};
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
+use occmask::process::rectify::GeometryOptions;
 use occmask::process::{
     process_file, OdometryAnchor, PipelineOptions, PoseMode, ProcessConfig, ProcessHooks, ProcessReport,
     DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
@@ -26,7 +27,9 @@ use occmask::process::{
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
 
-use super::options::{parse_at_least_one, parse_camera_arg, parse_pair_gap_ms, parse_positive, WriteArgs};
+use super::options::{
+    parse_at_least_one, parse_camera_arg, parse_pair_gap_ms, parse_pose, parse_positive, WriteArgs,
+};
 use super::{Globals, Outcome};
 
 const AFTER_HELP: &str = "\
@@ -135,10 +138,35 @@ pub struct ProcessArgs {
     #[arg(long)]
     pub camera_info_topic: Option<String>,
 
-    /// Intrinsics instead of a calibration topic: fr1, fr2, fr3, icsl, larr, kinect-default or
-    /// FX,FY,CX,CY in pixels.
+    /// Intrinsics instead of a calibration topic: fr1, fr2, fr3, icsl, larr, kinect-default,
+    /// bonn, fr1-distorted, fr2-distorted, or FX,FY,CX,CY in pixels, optionally followed by
+    /// distortion K1,K2,P1,P2[,K3] (plumb_bob) or K1,K2,P1,P2,K3,K4,K5,K6 (rational_polynomial).
     #[arg(long, value_parser = parse_camera_arg)]
     pub camera: Option<String>,
+
+    /// Calibration topic of the depth camera, for depth from another camera than colour
+    /// (default: the one beside the depth topic).
+    #[arg(long)]
+    pub depth_camera_info_topic: Option<String>,
+
+    /// The depth is registered to colour already (same pixels), whatever its frame_id and
+    /// calibration say: no registration.
+    #[arg(long, conflicts_with = "depth_to_color")]
+    pub depth_aligned: bool,
+
+    /// The depth camera's pose in the colour camera's frame, X,Y,Z,QX,QY,QZ,QW (metres, unit
+    /// quaternion), instead of the file's transforms (/tf_static, /tf); registers depth.
+    #[arg(long, value_parser = parse_pose, allow_hyphen_values = true)]
+    pub depth_to_color: Option<nalgebra::Isometry3<f64>>,
+
+    /// Treat the colour camera as a pinhole: lens distortion in the calibration is ignored.
+    #[arg(long)]
+    pub no_undistort: bool,
+
+    /// With --pose-topic: the marker's pose in the camera frame, X,Y,Z,QX,QY,QZ,QW, or `bonn`
+    /// (the topic gives the marker's pose; the camera's is marker · inverse of this).
+    #[arg(long, value_parser = parse_pose, allow_hyphen_values = true, requires = "pose_topic")]
+    pub camera_from_marker: Option<nalgebra::Isometry3<f64>>,
 
     /// Raw 16-bit depth units per metre (overrides channel metadata; default 1000 = mm).
     #[arg(long, value_parser = parse_positive)]
@@ -267,7 +295,7 @@ fn plan(args: &ProcessArgs) -> anyhow::Result<Vec<Job>> {
 }
 
 fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
-    let intrinsics = args
+    let camera = args
         .camera
         .as_deref()
         .map(dataset::parse_camera)
@@ -317,9 +345,16 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
             rgb: args.rgb_topic.clone(),
             depth: args.depth_topic.clone(),
             camera_info: args.camera_info_topic.clone(),
+            depth_camera_info: args.depth_camera_info_topic.clone(),
             pose: args.pose_topic.clone(),
         },
-        intrinsics,
+        intrinsics: camera.map(|c| c.intrinsics),
+        camera_distortion: camera.and_then(|c| c.distortion),
+        geometry: GeometryOptions {
+            depth_aligned: args.depth_aligned,
+            color_from_depth: args.depth_to_color,
+            no_undistort: args.no_undistort,
+        },
         depth_units_per_meter: args.depth_units_per_meter,
         pose_mode,
         pose_child_frame: args.pose_frame.clone(),
@@ -461,6 +496,7 @@ fn run_one(
     }
     let mut factory = occmask::process::pipeline_factory(PipelineOptions {
         keep_accumulation: args.accumulation,
+        camera_from_marker: args.camera_from_marker,
     });
     let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
         .with_context(|| {
@@ -687,8 +723,8 @@ fn print_timings(results: &[JobResult]) {
     let mut out = std::io::stderr().lock();
     let _ = writeln!(
         out,
-        "{:<32} {:>7} {:>9} {:>11} {:>12} {:>12}",
-        "frame loop (s)", "loop", "pipeline", "input wait", "output wait", "writer tail"
+        "{:<32} {:>7} {:>9} {:>8} {:>11} {:>12} {:>12}",
+        "frame loop (s)", "loop", "pipeline", "rectify", "input wait", "output wait", "writer tail"
     );
     for r in results {
         if let Ok((rep, _)) = &r.outcome {
@@ -700,8 +736,8 @@ fn print_timings(results: &[JobResult]) {
                 .unwrap_or_default();
             let _ = writeln!(
                 out,
-                "{name:<32} {:>7.3} {:>9.3} {:>11.3} {:>12.3} {:>12.3}",
-                t.loop_s, t.pipeline_s, t.input_wait_s, t.output_wait_s, t.writer_tail_s
+                "{name:<32} {:>7.3} {:>9.3} {:>8.3} {:>11.3} {:>12.3} {:>12.3}",
+                t.loop_s, t.pipeline_s, t.rectify_s, t.input_wait_s, t.output_wait_s, t.writer_tail_s
             );
         }
     }
@@ -754,6 +790,20 @@ fn print_summary(results: &[JobResult], jobs: &[Job], budget: &ThreadBudget) {
             }
             Err(_) => {
                 let _ = writeln!(out, "{name:<32} FAILED (see below)");
+            }
+        }
+    }
+    // What was done to the images: registration and undistortion change what the pipeline
+    // saw, so they are never silent.
+    for r in results {
+        if let Ok((rep, _)) = &r.outcome {
+            if !rep.geometry.is_identity() {
+                let name = r
+                    .input
+                    .file_name()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let _ = writeln!(out, "{name}: {}", rep.geometry.describe());
             }
         }
     }

@@ -17,12 +17,8 @@ use crate::geometry::PinholeIntrinsics;
 use crate::trajectory::StampedPose;
 
 /// The dataset's colour (and registered depth) intrinsics, 640×480.
-pub const INTRINSICS: PinholeIntrinsics = PinholeIntrinsics {
-    fx: 542.822841,
-    fy: 542.576870,
-    cx: 315.593520,
-    cy: 237.756098,
-};
+/// Its lens distortion is [`crate::geometry::distortion::presets::BONN`] (`--camera bonn`).
+pub const INTRINSICS: PinholeIntrinsics = crate::geometry::camera::presets::BONN;
 
 /// Depth PNG units per metre (as TUM).
 pub const DEPTH_UNITS_PER_METER: f64 = 5000.0;

@@ -21,6 +21,7 @@ use prost::bytes::Bytes;
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::{presets, PinholeIntrinsics};
+use crate::geometry::distortion::LensDistortion;
 use crate::image_buf::{
     depth_m_from_u16_into, gray_from_rgb8, DepthMeters, GrayF32, ImageSize, Mask, Rgb8, MASK_SET,
 };
@@ -354,47 +355,102 @@ pub fn parse_groundtruth(text: &str, source: &Path) -> Result<Vec<StampedPose>> 
     Ok(poses)
 }
 
-/// Parses `--camera`: a preset name (`fr1`, `fr2`, `fr3`, `icsl`, `larr`, `kinect-default`)
-/// or `FX,FY,CX,CY` in pixels.
+/// A camera given on the command line: pinhole intrinsics and, for presets and the long
+/// numeric form, the lens distortion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraSpec {
+    /// Pinhole intrinsics.
+    pub intrinsics: PinholeIntrinsics,
+    /// Lens distortion; `None` = pinhole.
+    pub distortion: Option<LensDistortion>,
+}
+
+impl CameraSpec {
+    const fn pinhole(intrinsics: PinholeIntrinsics) -> Self {
+        Self {
+            intrinsics,
+            distortion: None,
+        }
+    }
+}
+
+/// Accepted `--camera` forms, for error messages.
+const CAMERA_FORMS: &str = "fr1, fr2, fr3, icsl, larr, kinect-default, bonn, fr1-distorted, fr2-distorted, \
+    FX,FY,CX,CY in pixels (e.g. 520.9,521.0,325.1,249.7), or FX,FY,CX,CY followed by the \
+    plumb_bob distortion K1,K2,P1,P2[,K3] or rational_polynomial K1,K2,P1,P2,K3,K4,K5,K6";
+
+/// Parses `--camera`: a preset name ([`camera_preset`]) or `FX,FY,CX,CY` in pixels, optionally
+/// followed by distortion coefficients in ROS order (4 or 5 for `plumb_bob`, 8 for
+/// `rational_polynomial`).
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] naming the accepted forms.
-pub fn parse_camera(text: &str) -> Result<PinholeIntrinsics> {
+pub fn parse_camera(text: &str) -> Result<CameraSpec> {
     if let Some(preset) = camera_preset(text) {
         return Ok(preset);
     }
-    let bad = || {
-        Error::InvalidParameter {
+    let bad = || Error::InvalidParameter {
         name: "--camera",
         value: text.to_owned(),
-        expected: "fr1, fr2, fr3, icsl, larr, kinect-default or FX,FY,CX,CY in pixels (e.g. 520.9,521.0,325.1,249.7)"
-            .into(),
-    }
+        expected: CAMERA_FORMS.into(),
     };
     let values: Vec<f64> = text
         .split(',')
         .map(|v| v.trim().parse::<f64>())
         .collect::<std::result::Result<_, _>>()
         .map_err(|_| bad())?;
-    let [fx, fy, cx, cy] = values[..] else {
-        return Err(bad());
-    };
-    let intrinsics = PinholeIntrinsics::new(fx, fy, cx, cy);
+    let (k, d) = values.split_at_checked(4).ok_or_else(bad)?;
+    let intrinsics = PinholeIntrinsics::new(k[0], k[1], k[2], k[3]);
     if !intrinsics.is_valid() {
         return Err(bad());
     }
-    Ok(intrinsics)
+    let model = match d.len() {
+        0 | 4 | 5 => "plumb_bob",
+        8 => "rational_polynomial",
+        _ => return Err(bad()),
+    };
+    let distortion = LensDistortion::from_ros(model, d).map_err(|_| bad())?;
+    Ok(CameraSpec {
+        intrinsics,
+        distortion,
+    })
 }
 
-/// The intrinsics preset called `name` (case-insensitive, `freiburgN` = `frN`).
-pub fn camera_preset(name: &str) -> Option<PinholeIntrinsics> {
+/// The camera preset called `name` (case-insensitive, `freiburgN` = `frN`). `fr1` and `fr2`
+/// are pinhole, as the reference implementations use TUM's images; `fr1-distorted` and
+/// `fr2-distorted` add TUM's published distortion (its fr1/fr2 images are not undistorted;
+/// fr3's are). `bonn` is the Bonn RGB-D Dynamic Dataset's calibration with its distortion.
+pub fn camera_preset(name: &str) -> Option<CameraSpec> {
+    use crate::geometry::distortion::presets as lens;
+    let distorted = |intrinsics, distortion| CameraSpec {
+        intrinsics,
+        distortion: Some(distortion),
+    };
     match name.to_ascii_lowercase().as_str() {
-        "fr1" | "freiburg1" => Some(presets::TUM_FR1),
-        "fr2" | "freiburg2" => Some(presets::TUM_FR2),
-        "fr3" | "freiburg3" => Some(presets::TUM_FR3),
-        "icsl" => Some(presets::ICSL),
-        "larr" => Some(presets::LARR),
-        "kinect-default" | "kinect" | "default" => Some(presets::KINECT_DEFAULT),
+        "fr1" | "freiburg1" => Some(CameraSpec::pinhole(presets::TUM_FR1)),
+        "fr2" | "freiburg2" => Some(CameraSpec::pinhole(presets::TUM_FR2)),
+        "fr3" | "freiburg3" => Some(CameraSpec::pinhole(presets::TUM_FR3)),
+        "fr1-distorted" => Some(distorted(presets::TUM_FR1, lens::TUM_FR1)),
+        "fr2-distorted" => Some(distorted(presets::TUM_FR2, lens::TUM_FR2)),
+        "icsl" => Some(CameraSpec::pinhole(presets::ICSL)),
+        "larr" => Some(CameraSpec::pinhole(presets::LARR)),
+        "bonn" => Some(distorted(presets::BONN, lens::BONN)),
+        "kinect-default" | "kinect" | "default" => Some(CameraSpec::pinhole(presets::KINECT_DEFAULT)),
+        _ => None,
+    }
+}
+
+/// The `--camera-from-marker` preset called `name` (`bonn`), as X, Y, Z, QX, QY, QZ, QW.
+/// `bonn` is [`bonn::marker_from_camera`] inverted: the rigid part of the dataset's published
+/// conversion (its 6 % ground-truth scale is no rigid transform and stays out; see
+/// `examples/marker_check.rs` and docs/inputs.md).
+pub fn camera_from_marker_preset(name: &str) -> Option<[f64; 7]> {
+    match name.to_ascii_lowercase().as_str() {
+        "bonn" => {
+            let camera_from_marker = bonn::marker_from_camera().inverse();
+            let (t, q) = (camera_from_marker.translation.vector, camera_from_marker.rotation);
+            Some([t.x, t.y, t.z, q.i, q.j, q.k, q.w])
+        }
         _ => None,
     }
 }
@@ -730,6 +786,20 @@ mod tests {
         assert_eq!(read_mask(&path).unwrap().as_slice(), &[0, 0, MASK_SET, MASK_SET]);
     }
 
+    /// The preset is the inverse of the dataset module's marker-to-camera transform.
+    #[test]
+    fn bonn_marker_preset_is_the_dataset_conversion() {
+        use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+        let [x, y, z, qx, qy, qz, qw] = camera_from_marker_preset("Bonn").unwrap();
+        let preset = nalgebra::Isometry3::from_parts(
+            Translation3::new(x, y, z),
+            UnitQuaternion::from_quaternion(Quaternion::new(qw, qx, qy, qz)),
+        );
+        let expected = bonn::marker_from_camera().inverse();
+        assert!((preset.to_homogeneous() - expected.to_homogeneous()).norm() < 1e-12);
+        assert!(camera_from_marker_preset("tum").is_none());
+    }
+
     #[test]
     fn camera_names() {
         assert_eq!(
@@ -739,12 +809,35 @@ mod tests {
         assert_eq!(camera_from_folder_name("tum_fr3_walking"), Some("fr3"));
         assert_eq!(camera_from_folder_name("office"), None);
         assert_eq!(camera_from_folder_name("frame1"), None);
-        assert_eq!(parse_camera("fr1").unwrap(), presets::TUM_FR1);
+        assert_eq!(parse_camera("fr1").unwrap().intrinsics, presets::TUM_FR1);
+        assert_eq!(parse_camera("fr1").unwrap().distortion, None);
         assert_eq!(
             parse_camera("500,501,320.5,240").unwrap(),
-            PinholeIntrinsics::new(500.0, 501.0, 320.5, 240.0)
+            CameraSpec::pinhole(PinholeIntrinsics::new(500.0, 501.0, 320.5, 240.0))
         );
-        for bad in ["fr4", "1,2,3", "a,b,c,d", "-5,5,1,1"] {
+        let bonn = parse_camera("Bonn").unwrap();
+        assert_eq!(bonn.intrinsics, presets::BONN);
+        assert_eq!(
+            bonn.distortion.map(|d| d.to_ros()),
+            Some(("plumb_bob", vec![0.039903, -0.099343, -0.000730, -0.000144, 0.0]))
+        );
+        assert_eq!(
+            parse_camera(
+                "542.822841,542.576870,315.593520,237.756098,0.039903,-0.099343,-0.000730,-0.000144,0"
+            )
+            .unwrap(),
+            bonn
+        );
+        let rational = parse_camera("500,500,320,240,0.1,0.2,0,0,0.3,0.4,0.5,0.6").unwrap();
+        assert_eq!(rational.distortion.map(|d| d.k6), Some(0.6));
+        for bad in [
+            "fr4",
+            "1,2,3",
+            "a,b,c,d",
+            "-5,5,1,1",
+            "500,500,320,240,0.1",
+            "500,500,320,240,nan,0,0,0",
+        ] {
             assert!(parse_camera(bad).is_err(), "{bad}");
         }
     }

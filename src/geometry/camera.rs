@@ -2,8 +2,9 @@
 
 use nalgebra::{Point2, Point3};
 
-/// Pinhole intrinsics in pixels (0-based pixel centres, docs/method.md "Conventions").
-/// Distortion is ignored, as by every reference implementation.
+/// Pinhole intrinsics in pixels (0-based pixel centres, docs/method.md "Conventions"). Lens
+/// distortion is [`super::distortion::CameraModel`]'s; odometry and detection see undistorted
+/// images only.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PinholeIntrinsics {
     /// Focal length along x, pixels.
@@ -97,6 +98,10 @@ pub mod presets {
         326.860_452_181_942_4,
         236.121_014_917_259_4,
     );
+    /// Bonn RGB-D Dynamic Dataset (one calibration for the whole dataset, published with it;
+    /// its distortion is [`crate::geometry::distortion::presets::BONN`]).
+    pub const BONN: PinholeIntrinsics =
+        PinholeIntrinsics::new(542.822841, 542.576870, 315.593520, 237.756098);
     /// The ROS / TUM default Kinect intrinsics.
     pub const KINECT_DEFAULT: PinholeIntrinsics = PinholeIntrinsics::new(525.0, 525.0, 319.5, 239.5);
 }

@@ -1,4 +1,4 @@
-//! Pinhole camera model and SE(3) Lie-group helpers (pure math, no I/O).
+//! Pinhole camera model, lens distortion and SE(3) Lie-group helpers (pure math, no I/O).
 //!
 //! # Conventions (docs/method.md), stated once for the whole crate
 //! - Pixels are 0-based: x = column (right), y = row (down); (cx, cy) use the same convention.
@@ -12,7 +12,9 @@
 //!   trajectory is chained as C_{i+1} = C_i · current_from_reference⁻¹.
 
 pub mod camera;
+pub mod distortion;
 pub mod se3;
 
 pub use camera::PinholeIntrinsics;
+pub use distortion::{CameraModel, LensDistortion};
 pub use se3::{se3_exp, se3_log, Twist};

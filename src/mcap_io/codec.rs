@@ -13,6 +13,7 @@ use prost::bytes::Bytes;
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
+use crate::geometry::distortion::LensDistortion;
 use crate::image_buf::{ImageSize, Mask, Rgb8};
 use crate::time::{join_ns, split_ns};
 use crate::trajectory::StampedPose;
@@ -22,8 +23,7 @@ use super::{
     SCHEMA_FRAME_TRANSFORM, SCHEMA_POSE_IN_FRAME, SCHEMA_RAW_IMAGE,
 };
 
-/// Distortion model written into calibrations. The coefficients are all zero: every stage of
-/// occmask ignores lens distortion (docs/method.md, "Datasets"), so the viewer must not undistort either.
+/// Distortion model written into pinhole calibrations (all coefficients zero).
 pub const DISTORTION_MODEL: &str = "plumb_bob";
 /// Number of `plumb_bob` coefficients (k1, k2, p1, p2, k3).
 const PLUMB_BOB_COEFFICIENTS: usize = 5;
@@ -160,7 +160,8 @@ pub fn rgb8_image(timestamp_ns: u64, frame_id: &str, rgb: &Rgb8) -> Result<RawIm
     })
 }
 
-/// A pinhole `CameraCalibration` (zero distortion, identity rectification, P = [K | 0]).
+/// A `CameraCalibration`: `plumb_bob` with zero coefficients without `distortion` (else the
+/// distortion's own model and coefficients), identity rectification, P = [K | 0].
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for images wider or taller than `u32::MAX`.
@@ -169,15 +170,20 @@ pub fn camera_calibration(
     frame_id: &str,
     intrinsics: &PinholeIntrinsics,
     size: ImageSize,
+    distortion: Option<&LensDistortion>,
 ) -> Result<CameraCalibration> {
     let PinholeIntrinsics { fx, fy, cx, cy } = *intrinsics;
+    let (distortion_model, d) = match distortion {
+        Some(lens) => lens.to_ros(),
+        None => (DISTORTION_MODEL, vec![0.0; PLUMB_BOB_COEFFICIENTS]),
+    };
     Ok(CameraCalibration {
         timestamp: Some(timestamp(timestamp_ns)),
         frame_id: frame_id.to_owned(),
         width: dimension(size.width, "width")?,
         height: dimension(size.height, "height")?,
-        distortion_model: DISTORTION_MODEL.to_owned(),
-        d: vec![0.0; PLUMB_BOB_COEFFICIENTS],
+        distortion_model: distortion_model.to_owned(),
+        d,
         k: intrinsics.k_row_major().to_vec(),
         r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
         p: vec![fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
@@ -595,7 +601,7 @@ mod tests {
     #[test]
     fn calibration_round_trips() {
         let size = ImageSize::new(640, 480);
-        let msg = camera_calibration(5, "cam", &presets::TUM_FR2, size).unwrap();
+        let msg = camera_calibration(5, "cam", &presets::TUM_FR2, size, None).unwrap();
         assert_eq!(msg.p[0], presets::TUM_FR2.fx);
         assert_eq!(msg.p[6], presets::TUM_FR2.cy);
         assert_eq!(

@@ -9,13 +9,16 @@
 //! - [`writer`]: [`RgbdMcapWriter`], which registers schemas and channels once and writes
 //!   messages in the order it is given (callers merge their streams by time);
 //! - [`reader`]: [`McapFileReader`] for files this crate wrote;
-//! - [`output`]: [`AtomicOutput`], the temporary-file-then-rename helper every command uses.
+//! - [`output`]: [`AtomicOutput`], the temporary-file-then-rename helper every command uses;
+//! - [`ros_out`]: [`ros_out::RosMcapWriter`], recordings in ROS 1 / ROS 2 conventions (synthetic
+//!   recordings and fixtures).
 
 pub mod annotate;
 pub mod codec;
 pub mod input;
 pub mod output;
 pub mod reader;
+pub mod ros_out;
 pub mod writer;
 
 pub use codec::{ColorFormat, Decoded};

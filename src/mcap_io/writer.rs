@@ -16,6 +16,7 @@ use prost::bytes::Bytes;
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
+use crate::geometry::distortion::LensDistortion;
 use crate::image_buf::{ImageSize, Mask, Rgb8};
 
 use super::codec::{self, ColorFormat};
@@ -292,7 +293,7 @@ impl<W: Write + Seek> RgbdMcapWriter<W> {
         self.write_message(topic, MessageKind::RawImage, timestamp_ns, &msg)
     }
 
-    /// Writes a pinhole calibration (zero distortion) for images of `size`.
+    /// Writes a calibration for images of `size` (zero distortion without `distortion`).
     ///
     /// # Errors
     /// As [`Self::write_color_compressed`].
@@ -302,8 +303,10 @@ impl<W: Write + Seek> RgbdMcapWriter<W> {
         timestamp_ns: u64,
         intrinsics: &PinholeIntrinsics,
         size: ImageSize,
+        distortion: Option<&LensDistortion>,
     ) -> Result<()> {
-        let msg = codec::camera_calibration(timestamp_ns, FRAME_CAMERA_OPTICAL, intrinsics, size)?;
+        let msg =
+            codec::camera_calibration(timestamp_ns, FRAME_CAMERA_OPTICAL, intrinsics, size, distortion)?;
         self.write_message(topic, MessageKind::CameraCalibration, timestamp_ns, &msg)
     }
 

@@ -1,5 +1,5 @@
-//! In-memory RGB-D MCAP fixtures in three flavours (Foxglove protobuf, Foxglove JSON, ROS 2
-//! CDR) with the same pixels, stamps, calibration and poses, plus a deterministic
+//! In-memory RGB-D MCAP fixtures in four flavours (Foxglove protobuf, Foxglove JSON, ROS 2
+//! CDR, ROS 1) with the same pixels, stamps, calibration and poses, plus a deterministic
 //! [`FrameProcessor`] whose outputs depend on every decoded pixel, so equal outputs across
 //! flavours mean equal decoding.
 #![allow(dead_code, clippy::unwrap_used)] // shared by several test crates and the bench
@@ -12,9 +12,11 @@ use foxglove::Encode;
 use mcap::records::MessageHeader;
 use nalgebra::{Isometry3, Vector3};
 use occmask::geometry::camera::PinholeIntrinsics;
+use occmask::geometry::distortion::CameraModel;
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Mask, MASK_SET};
 use occmask::mcap_io::codec;
-use occmask::mcap_io::input::{json, ros2};
+use occmask::mcap_io::input::{json, ros1, ros2};
+use occmask::mcap_io::ros_out::{self, RosImage, RosVersion};
 use occmask::process::{FrameProcessor, PoseMode, ProcessedFrame, RgbdFrame};
 use occmask::Result;
 use prost::Message as _;
@@ -28,9 +30,11 @@ pub enum Flavor {
     Json,
     /// bgr8 Image colour, 16UC1 depth (mm), CDR with the ros2 profile.
     Ros2,
+    /// The same as ROS 1 messages (ros1 profile), written by `occmask::mcap_io::ros_out`.
+    Ros1,
 }
 
-pub const ALL_FLAVORS: [Flavor; 3] = [Flavor::Protobuf, Flavor::Json, Flavor::Ros2];
+pub const ALL_FLAVORS: [Flavor; 4] = [Flavor::Protobuf, Flavor::Json, Flavor::Ros2, Flavor::Ros1];
 
 /// Shape of a fixture sequence.
 #[derive(Debug, Clone, Copy)]
@@ -41,7 +45,8 @@ pub struct FixtureSpec {
     pub depth_lag_ns: u64,
     /// Write the summary's chunk indexes (false = linear fallback).
     pub indexed: bool,
-    /// Colour image encoding for the ROS flavour (`bgr8`, `rgb8`, `yuv422`, ...).
+    /// Colour image encoding for the ROS flavour (`bgr8`, `rgb8`; others are written as
+    /// `bgr8` bytes under that name, for unsupported-encoding errors).
     pub ros_color_encoding: &'static str,
     /// Calibration messages.
     pub with_calibration: bool,
@@ -223,6 +228,27 @@ fn register<W: Write + Seek>(w: &mut mcap::Writer<W>, flavor: Flavor, spec: &Fix
             );
             (color, depth, info, gt)
         }
+        Flavor::Ros1 => {
+            let s = |name: &str, text: String| (name.to_owned(), "ros1msg".to_owned(), text.into_bytes());
+            let mut a = |t: &str, s: (String, String, Vec<u8>)| {
+                add(t, (s.0.as_str(), s.1.as_str(), s.2), "ros1", &none)
+            };
+            let color = a(COLOR_TOPIC, s(ros1::names::IMAGE, ros1::schema_text::image()));
+            let depth = a(DEPTH_TOPIC, s(ros1::names::IMAGE, ros1::schema_text::image()));
+            let info = if spec.with_calibration {
+                a(
+                    INFO_TOPIC,
+                    s(ros1::names::CAMERA_INFO, ros1::schema_text::camera_info()),
+                )
+            } else {
+                0
+            };
+            let gt = a(
+                GT_TOPIC,
+                s(ros1::names::POSE_STAMPED, ros1::schema_text::pose_stamped()),
+            );
+            (color, depth, info, gt)
+        }
     };
     let gt_mask = (flavor == Flavor::Protobuf).then(|| {
         let s = fm::RawImage::get_schema().unwrap();
@@ -258,19 +284,21 @@ fn color_msg(flavor: Flavor, spec: &FixtureSpec, i: usize, stamp: u64) -> Vec<u8
             format: "png".into(),
         })
         .unwrap(),
-        Flavor::Ros2 => {
+        Flavor::Ros2 | Flavor::Ros1 => {
             let enc = spec.ros_color_encoding;
-            let bpp = if enc == "yuv422" { 2 } else { 3 };
+            let bpp = 3;
             let mut data = Vec::with_capacity(size.area() * bpp);
             for y in 0..size.height {
                 for x in 0..size.width {
                     let [r, g, b] = rgb_pixel(i, x, y);
                     match enc {
                         "rgb8" => data.extend_from_slice(&[r, g, b]),
-                        "yuv422" => data.extend_from_slice(&[r, g]),
                         _ => data.extend_from_slice(&[b, g, r]),
                     }
                 }
+            }
+            if flavor == Flavor::Ros1 {
+                return ros1_image(i, enc, size, bpp, stamp, &data);
             }
             cdr(&ros2::Image {
                 header: ros2::Header {
@@ -286,6 +314,18 @@ fn color_msg(flavor: Flavor, spec: &FixtureSpec, i: usize, stamp: u64) -> Vec<u8
             })
         }
     }
+}
+
+/// A ROS 1 `sensor_msgs/Image` (header sequence number = frame index, as a publisher counts).
+fn ros1_image(i: usize, encoding: &str, size: ImageSize, bpp: usize, stamp: u64, data: &[u8]) -> Vec<u8> {
+    let image = RosImage {
+        frame_id: FRAME_ID,
+        encoding,
+        size,
+        step: size.width * bpp,
+        data,
+    };
+    ros_out::encode_image(RosVersion::Ros1, i as u32, stamp, &image).unwrap()
 }
 
 fn depth_msg(flavor: Flavor, size: ImageSize, i: usize, stamp: u64) -> Vec<u8> {
@@ -328,12 +368,17 @@ fn depth_msg(flavor: Flavor, size: ImageSize, i: usize, stamp: u64) -> Vec<u8> {
             step: (size.width * 2) as u32,
             data,
         }),
+        Flavor::Ros1 => ros1_image(i, "16UC1", size, 2, stamp, &data),
     }
 }
 
 fn info_msg(flavor: Flavor, size: ImageSize, stamp: u64) -> Vec<u8> {
-    let cal = codec::camera_calibration(stamp, FRAME_ID, &INTRINSICS, size).unwrap();
+    let cal = codec::camera_calibration(stamp, FRAME_ID, &INTRINSICS, size, None).unwrap();
     match flavor {
+        Flavor::Ros1 => {
+            let camera = CameraModel::pinhole(size, INTRINSICS);
+            ros_out::encode_camera_info(RosVersion::Ros1, 0, stamp, FRAME_ID, &camera).unwrap()
+        }
         Flavor::Protobuf => cal.encode_to_vec(),
         Flavor::Json => serde_json::to_vec(&json::CameraCalibration {
             timestamp: jtime(stamp),
@@ -376,6 +421,7 @@ fn pose_msg(flavor: Flavor, stamp: u64, iso: &Isometry3<f64>) -> Vec<u8> {
     let t = iso.translation.vector;
     let q = iso.rotation;
     match flavor {
+        Flavor::Ros1 => ros_out::encode_pose(RosVersion::Ros1, 0, stamp, "world", iso).unwrap(),
         Flavor::Protobuf => codec::pose_in_frame(stamp, "world", iso).encode_to_vec(),
         Flavor::Json => serde_json::to_vec(&json::PoseInFrame {
             timestamp: jtime(stamp),
@@ -427,6 +473,9 @@ pub fn write_fixture<W: Write + Seek>(sink: W, flavor: Flavor, spec: &FixtureSpe
         .compression(Some(mcap::Compression::Lz4));
     if flavor == Flavor::Ros2 {
         options = options.profile("ros2");
+    }
+    if flavor == Flavor::Ros1 {
+        options = options.profile("ros1");
     }
     if !spec.indexed {
         options = options.emit_chunk_indexes(false).emit_message_indexes(false);

@@ -1,5 +1,7 @@
 //! A bounded reader for plain CDR (XCDR1, what rosbag2 MCAP files hold) into the serde structs
-//! of [`super::ros2`].
+//! of [`super::ros2`], and for the ROS 1 serialisation ([`from_ros1_bytes`], the structs of
+//! [`super::ros1`]): the same wire elements without the encapsulation header, without alignment
+//! padding, always little-endian, and with strings that carry no terminating NUL.
 //!
 //! The `cdr` crate's reader allocates and zero-fills every string or byte sequence at its
 //! *declared* length before reading it, so a 20-byte message declaring a 4 GiB `frame_id` made
@@ -57,8 +59,38 @@ pub(crate) fn from_bytes<T: de::DeserializeOwned>(data: &[u8]) -> Result<T> {
         data: body,
         pos: 0,
         little_endian,
+        dialect: Dialect::Cdr,
     };
     T::deserialize(&mut reader)
+}
+
+/// Deserializes one ROS 1 message (`ros1msg` schemas, `ros1` message encoding).
+pub(crate) fn from_ros1_bytes<T: de::DeserializeOwned>(data: &[u8]) -> Result<T> {
+    let mut reader = Reader {
+        data,
+        pos: 0,
+        little_endian: true,
+        dialect: Dialect::Ros1,
+    };
+    let value = T::deserialize(&mut reader)?;
+    // ROS 1 messages have no padding: bytes left over mean another message type.
+    if reader.pos != data.len() {
+        return Err(CdrError(format!(
+            "{} bytes left after the message's last field (of {})",
+            data.len() - reader.pos,
+            data.len()
+        )));
+    }
+    Ok(value)
+}
+
+/// The two wire formats read by [`Reader`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Dialect {
+    /// XCDR1: aligned primitives, NUL-terminated strings.
+    Cdr,
+    /// ROS 1: packed primitives, strings without NUL.
+    Ros1,
 }
 
 struct Reader<'a> {
@@ -66,9 +98,18 @@ struct Reader<'a> {
     /// Offset into `data` (alignment is relative to the end of the encapsulation header).
     pos: usize,
     little_endian: bool,
+    dialect: Dialect,
 }
 
 impl<'a> Reader<'a> {
+    /// Bytes before `data` in the message (for offsets in error messages).
+    fn header_bytes(&self) -> usize {
+        match self.dialect {
+            Dialect::Cdr => ENCAPSULATION_HEADER_BYTES,
+            Dialect::Ros1 => 0,
+        }
+    }
+
     fn remaining(&self) -> usize {
         self.data.len() - self.pos
     }
@@ -77,7 +118,7 @@ impl<'a> Reader<'a> {
         if n > self.remaining() {
             return Err(CdrError(format!(
                 "{what} needs {n} bytes at offset {}, but only {} remain",
-                self.pos + ENCAPSULATION_HEADER_BYTES,
+                self.pos + self.header_bytes(),
                 self.remaining()
             )));
         }
@@ -88,8 +129,10 @@ impl<'a> Reader<'a> {
 
     /// Reads an `N`-byte primitive aligned to `N`.
     fn primitive<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
-        let padding = (N - self.pos % N) % N;
-        self.take(padding, "alignment padding")?;
+        if self.dialect == Dialect::Cdr {
+            let padding = (N - self.pos % N) % N;
+            self.take(padding, "alignment padding")?;
+        }
         let mut bytes = [0u8; N];
         bytes.copy_from_slice(self.take(N, what)?);
         if self.little_endian != cfg!(target_endian = "little") {
@@ -110,8 +153,12 @@ impl<'a> Reader<'a> {
 
     fn string(&mut self) -> Result<String> {
         let bytes = self.sequence_bytes("string")?;
-        // The length counts the terminating NUL, which is dropped (as the `cdr` crate does).
-        let text = bytes.strip_suffix(&[0]).unwrap_or(bytes);
+        // The CDR length counts the terminating NUL, which is dropped (as the `cdr` crate
+        // does); ROS 1 strings have none.
+        let text = match self.dialect {
+            Dialect::Cdr => bytes.strip_suffix(&[0]).unwrap_or(bytes),
+            Dialect::Ros1 => bytes,
+        };
         String::from_utf8(text.to_vec()).map_err(|e| CdrError(format!("string is not UTF-8: {e}")))
     }
 }

@@ -6,11 +6,12 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
+use crate::geometry::distortion::{CameraModel, LensDistortion};
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
 use crate::mcap_io::codec::decode_compressed_pixels;
 use crate::time::{checked_join_ns, join_ns};
 
-use super::{json, ros2};
+use super::{json, pixels, ros1, ros2};
 
 /// How a channel's messages are serialised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -21,6 +22,8 @@ pub enum Flavor {
     FoxgloveJson,
     /// ROS 2 message, CDR.
     Ros2Cdr,
+    /// ROS 1 message (`ros1` encoding, `ros1msg` schema).
+    Ros1,
 }
 
 /// What a channel carries.
@@ -82,6 +85,18 @@ impl ChannelType {
                     _ => return None,
                 };
                 (Flavor::Ros2Cdr, message)
+            }
+            ("ros1", name) => {
+                let message = match name {
+                    ros1::names::IMAGE => T::RawImage,
+                    ros1::names::COMPRESSED_IMAGE => T::CompressedImage,
+                    ros1::names::CAMERA_INFO => T::Calibration,
+                    ros1::names::POSE_STAMPED => T::PoseInFrame,
+                    ros1::names::TRANSFORM_STAMPED => T::FrameTransform,
+                    ros1::names::TF_MESSAGE | ros1::names::TF_MESSAGE_LEGACY => T::FrameTransforms,
+                    _ => return None,
+                };
+                (Flavor::Ros1, message)
             }
             _ => return None,
         };
@@ -171,6 +186,10 @@ pub struct CalibrationMsg {
     pub size: ImageSize,
     /// K, row-major (9 numbers when well-formed).
     pub k: Vec<f64>,
+    /// Distortion model name (`plumb_bob`, `rational_polynomial`, ...; may be empty).
+    pub distortion_model: String,
+    /// Distortion coefficients in the model's order (ROS / Foxglove `D`).
+    pub d: Vec<f64>,
 }
 
 impl CalibrationMsg {
@@ -185,6 +204,36 @@ impl CalibrationMsg {
             topic,
             " (an all-zero K means the camera is uncalibrated: pass --camera FX,FY,CX,CY)",
         )
+    }
+
+    /// The lens distortion (`None` for zero coefficients).
+    ///
+    /// # Errors
+    /// [`Error::Decode`] naming `topic` for unsupported models (fisheye) with non-zero
+    /// coefficients, naming the flags that override or ignore the distortion.
+    pub fn distortion(&self, topic: &str) -> Result<Option<LensDistortion>> {
+        LensDistortion::from_ros(&self.distortion_model, &self.d).map_err(|e| {
+            decode_error(
+                topic,
+                format!(
+                    "{}; pass --camera FX,FY,CX,CY[,K1,K2,P1,P2,K3] to give the camera, or \
+                     --no-undistort to treat the images as pinhole",
+                    e.0
+                ),
+            )
+        })
+    }
+
+    /// The camera model: size, intrinsics and distortion.
+    ///
+    /// # Errors
+    /// As [`Self::intrinsics`] and [`Self::distortion`].
+    pub fn camera_model(&self, topic: &str) -> Result<CameraModel> {
+        Ok(CameraModel {
+            size: self.size,
+            intrinsics: self.intrinsics(topic)?,
+            distortion: self.distortion(topic)?,
+        })
     }
 }
 
@@ -221,6 +270,21 @@ fn from_cdr<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str
     // checking declared lengths against the message before allocating (cdr_read.rs).
     super::cdr_read::from_bytes::<T>(data)
         .map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
+}
+
+fn from_ros1<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str) -> Result<T> {
+    super::cdr_read::from_ros1_bytes::<T>(data)
+        .map_err(|e| decode_error(topic, format!("expected a ROS 1 {what}: {e}")))
+}
+
+fn ros1_ns(t: ros1::Time, topic: &str) -> Result<u64> {
+    if t.nsecs >= 1_000_000_000 {
+        return Err(decode_error(
+            topic,
+            format!("expected stamp nsecs < 1e9, found {}", t.nsecs),
+        ));
+    }
+    Ok(join_ns(u64::from(t.secs), t.nsecs))
 }
 
 fn proto_ns(stamp: Option<&foxglove::messages::Timestamp>) -> u64 {
@@ -345,6 +409,32 @@ pub fn decode_image(ct: ChannelType, topic: &str, data: &[u8]) -> Result<ImageMs
                 },
             })
         }
+        (Flavor::Ros1, MessageType::RawImage) => {
+            let m: ros1::Image = from_ros1(data, topic, ros1::names::IMAGE)?;
+            Ok(ImageMsg {
+                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                payload: ImagePayload::Raw {
+                    width: m.width,
+                    height: m.height,
+                    encoding: m.encoding,
+                    step: m.step,
+                    big_endian: m.is_bigendian != 0,
+                    data: m.data,
+                },
+            })
+        }
+        (Flavor::Ros1, MessageType::CompressedImage) => {
+            let m: ros1::CompressedImage = from_ros1(data, topic, ros1::names::COMPRESSED_IMAGE)?;
+            Ok(ImageMsg {
+                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                payload: ImagePayload::Compressed {
+                    format: m.format,
+                    data: m.data,
+                },
+            })
+        }
         _ => Err(decode_error(
             topic,
             format!("expected an image channel, found {:?}", ct.message),
@@ -365,6 +455,8 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
                 frame_id: m.frame_id,
                 size: ImageSize::new(m.width as usize, m.height as usize),
                 k: m.k,
+                distortion_model: m.distortion_model,
+                d: m.d,
             })
         }
         (Flavor::FoxgloveJson, MessageType::Calibration) => {
@@ -374,6 +466,8 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
                 frame_id: m.frame_id,
                 size: ImageSize::new(m.width as usize, m.height as usize),
                 k: m.k,
+                distortion_model: m.distortion_model,
+                d: m.d,
             })
         }
         (Flavor::Ros2Cdr, MessageType::Calibration) => {
@@ -383,6 +477,19 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
                 frame_id: m.header.frame_id,
                 size: ImageSize::new(m.width as usize, m.height as usize),
                 k: m.k.to_vec(),
+                distortion_model: m.distortion_model,
+                d: m.d,
+            })
+        }
+        (Flavor::Ros1, MessageType::Calibration) => {
+            let m: ros1::CameraInfo = from_ros1(data, topic, ros1::names::CAMERA_INFO)?;
+            Ok(CalibrationMsg {
+                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
+                frame_id: m.header.frame_id,
+                size: ImageSize::new(m.width as usize, m.height as usize),
+                k: m.k.to_vec(),
+                distortion_model: m.distortion_model,
+                d: m.d,
             })
         }
         _ => Err(decode_error(
@@ -465,7 +572,37 @@ pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<Pos
             iso,
         ))
     };
+    let ros1_tf = |m: ros1::TransformStamped| -> Result<PoseSample> {
+        let (t, q) = (m.transform.translation, m.transform.rotation);
+        let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+        Ok(sample(
+            ros1_ns(m.header.stamp, topic)?,
+            m.header.frame_id,
+            Some(m.child_frame_id),
+            iso,
+        ))
+    };
     match (ct.flavor, ct.message) {
+        (Flavor::Ros1, MessageType::PoseInFrame) => {
+            let m: ros1::PoseStamped = from_ros1(data, topic, ros1::names::POSE_STAMPED)?;
+            let (t, q) = (m.pose.position, m.pose.orientation);
+            let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+            Ok(vec![sample(
+                ros1_ns(m.header.stamp, topic)?,
+                m.header.frame_id,
+                None,
+                iso,
+            )])
+        }
+        (Flavor::Ros1, MessageType::FrameTransform) => Ok(vec![ros1_tf(from_ros1(
+            data,
+            topic,
+            ros1::names::TRANSFORM_STAMPED,
+        )?)?]),
+        (Flavor::Ros1, MessageType::FrameTransforms) => {
+            let m: ros1::TfMessage = from_ros1(data, topic, ros1::names::TF_MESSAGE)?;
+            m.transforms.into_iter().map(ros1_tf).collect()
+        }
         (Flavor::FoxgloveProtobuf, MessageType::PoseInFrame) => {
             let m: fm::PoseInFrame = proto(data, topic, "foxglove.PoseInFrame")?;
             let pose = m.pose.unwrap_or_default();
@@ -525,10 +662,11 @@ pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<Pos
 }
 
 /// Colour encodings accepted by [`gray_from_image_into`].
-pub const SUPPORTED_COLOR_ENCODINGS: &str = "rgb8, bgr8, rgba8, bgra8, mono8/8UC1, PNG, JPEG";
+pub const SUPPORTED_COLOR_ENCODINGS: &str = "rgb8, bgr8, rgba8, bgra8, mono8/8UC1, yuv422/uyvy, \
+    yuv422_yuy2/yuyv, bayer_rggb8/bggr8/gbrg8/grbg8, PNG, JPEG";
 /// Depth encodings accepted by [`depth_from_image_into`].
-pub const SUPPORTED_DEPTH_ENCODINGS: &str =
-    "16UC1/mono16 (raw units), 32FC1 (metres), compressedDepth PNG (16UC1)";
+pub const SUPPORTED_DEPTH_ENCODINGS: &str = "16UC1/mono16 (raw units), 32FC1 (metres), \
+    compressedDepth png or rvl (16UC1 raw units, 32FC1 inverse-depth quantised)";
 
 /// Header bytes `compressed_depth_image_transport` puts before the PNG of a 16-bit depth
 /// image (format enum + two float quantisation parameters).
@@ -617,6 +755,38 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
             data,
             ..
         } => {
+            if let Some(uyvy) = match encoding.as_str() {
+                "yuv422" | "uyvy" | "UYVY" => Some(true),
+                "yuv422_yuy2" | "yuyv" | "YUYV" => Some(false),
+                _ => None,
+            } {
+                // Packed 4:2:2: two bytes per pixel, the luma is the grey.
+                let size = raw_rows(topic, *width, *height, *step, 2, data.len())?;
+                resize_for(gray, size);
+                let step = *step as usize;
+                for y in 0..size.height {
+                    let row = &data[y * step..y * step + size.width * 2];
+                    for (x, out) in gray.row_mut(y).iter_mut().enumerate() {
+                        *out = pixels::gray_from_video_luma(row[pixels::yuv422_luma_offset(x, uyvy)]);
+                    }
+                }
+                return Ok(());
+            }
+            if let Some(pattern) = pixels::BayerPattern::from_encoding(encoding) {
+                let size = raw_rows(topic, *width, *height, *step, 1, data.len())?;
+                resize_for(gray, size);
+                let step = *step as usize;
+                let rows: Vec<&[u8]> = (0..size.height)
+                    .map(|y| &data[y * step..y * step + size.width])
+                    .collect();
+                for y in 0..size.height {
+                    for (x, out) in gray.row_mut(y).iter_mut().enumerate() {
+                        let [pr, pg, pb] = pixels::demosaic_pixel(&rows, pattern, x, y);
+                        *out = wr * f32::from(pr) + wg * f32::from(pg) + wb * f32::from(pb);
+                    }
+                }
+                return Ok(());
+            }
             // (bytes per pixel, offsets of r, g, b); grey images use one channel three times.
             let (bpp, [r, g, b]) = match encoding.as_str() {
                 "rgb8" => (3, [0, 1, 2]),
@@ -729,20 +899,80 @@ pub fn depth_from_image_into(
             Ok(())
         }
         ImagePayload::Compressed { format, data } => {
-            if !format.contains("compressedDepth") || !format.starts_with("16UC1") {
+            let raw = format.starts_with("16UC1");
+            if !format.contains("compressedDepth") || !(raw || format.starts_with("32FC1")) {
                 return Err(unsupported(topic, "depth", format, SUPPORTED_DEPTH_ENCODINGS));
             }
-            let png = data.get(COMPRESSED_DEPTH_HEADER_BYTES..).unwrap_or_default();
-            let what = format!("{format} depth PNG");
-            let decoded = decode_compressed_pixels(png, image::ImageFormat::Png, topic, &what)?.into_luma16();
-            let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
+            let Some((header, payload)) = data.split_at_checked(COMPRESSED_DEPTH_HEADER_BYTES) else {
+                return Err(decode_error(
+                    topic,
+                    format!(
+                        "{format}: {} bytes, expected a {COMPRESSED_DEPTH_HEADER_BYTES}-byte header and \
+                         the compressed image",
+                        data.len()
+                    ),
+                ));
+            };
+            let (size, values) = if format.contains("compressedDepth rvl") {
+                rvl_values(payload, topic, format)?
+            } else {
+                let what = format!("{format} depth PNG");
+                let decoded =
+                    decode_compressed_pixels(payload, image::ImageFormat::Png, topic, &what)?.into_luma16();
+                let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
+                (size, decoded.into_raw())
+            };
             resize_for(depth_m, size);
-            for (o, v) in depth_m.as_mut_slice().iter_mut().zip(decoded.as_raw()) {
-                *o = f32::from(*v) * scale;
+            if raw {
+                for (o, v) in depth_m.as_mut_slice().iter_mut().zip(&values) {
+                    *o = f32::from(*v) * scale;
+                }
+            } else {
+                // 32FC1 is stored as quantised inverse depth q: depth = a / (q − b), q = 0
+                // invalid, with a and b the two floats after the format enum of the header.
+                let param = |i: usize| {
+                    let at = 4 + 4 * i;
+                    f32::from_le_bytes([header[at], header[at + 1], header[at + 2], header[at + 3]])
+                };
+                let (a, b) = (param(0), param(1));
+                for (o, v) in depth_m.as_mut_slice().iter_mut().zip(&values) {
+                    let d = if *v == 0 { 0.0 } else { a / (f32::from(*v) - b) };
+                    *o = if d.is_finite() && d > 0.0 { d } else { 0.0 };
+                }
             }
             Ok(())
         }
     }
+}
+
+/// The image size and values of a `compressedDepth rvl` payload (after the config header):
+/// width and height (`u32` each), then the RVL stream.
+fn rvl_values(payload: &[u8], topic: &str, format: &str) -> Result<(ImageSize, Vec<u16>)> {
+    let bad = |what: String| decode_error(topic, format!("{format}: {what}"));
+    let Some((dims, stream)) = payload.split_at_checked(pixels::RVL_SIZE_HEADER_BYTES) else {
+        return Err(bad(format!(
+            "{} bytes after the header, expected the {}-byte RVL size and the stream",
+            payload.len(),
+            pixels::RVL_SIZE_HEADER_BYTES
+        )));
+    };
+    let dim = |at: usize| u32::from_le_bytes([dims[at], dims[at + 1], dims[at + 2], dims[at + 3]]);
+    let size = ImageSize::new(dim(0) as usize, dim(4) as usize);
+    let pixels_declared = size.area() as u64;
+    let most = (stream.len() as u64)
+        .saturating_mul(pixels::RVL_MAX_PIXELS_PER_BYTE)
+        .min(crate::mcap_io::codec::MAX_COMPRESSED_IMAGE_PIXELS);
+    if pixels_declared == 0 || pixels_declared > most {
+        return Err(bad(format!(
+            "RVL image of {size} from {} bytes: expected at least one pixel and at most {most} \
+             (5 pixels per byte, {} in all)",
+            stream.len(),
+            crate::mcap_io::codec::MAX_COMPRESSED_IMAGE_PIXELS
+        )));
+    }
+    let mut values = vec![0u16; size.area()];
+    pixels::decode_rvl(stream, &mut values).map_err(bad)?;
+    Ok((size, values))
 }
 
 /// Encodes a message to protobuf bytes (helper for fixtures and tests).
@@ -839,6 +1069,103 @@ mod tests {
     }
 
     #[test]
+    fn packed_yuv_and_bayer_colour_give_the_gray_of_the_same_colour() {
+        // A uniform colour: BT.601 video-range Y of (200, 120, 40) is 16 + 219 · luma.
+        let (r, g, b) = (200u8, 120u8, 40u8);
+        let rgb = raw("rgb8", 4, 3, [r, g, b].repeat(4));
+        let mut expected = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        gray_from_image_into(&rgb, "/c", &mut expected).unwrap();
+        let luma = 16.0 + 219.0 * expected.get(0, 0);
+        let y = luma.round() as u8;
+        let mut gray = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        for (encoding, quad) in [("yuv422", [128, y, 128, y]), ("yuv422_yuy2", [y, 128, y, 128])] {
+            gray_from_image_into(&raw(encoding, 4, 2, quad.repeat(2)), "/c", &mut gray).unwrap();
+            assert!(
+                gray.as_slice()
+                    .iter()
+                    .all(|v| (v - expected.get(0, 0)).abs() < 0.5 / 219.0),
+                "{encoding}"
+            );
+        }
+        // Bayer RGGB mosaic of the colour, 4×4: demosaiced to the colour everywhere.
+        let mosaic: Vec<u8> = (0..16)
+            .map(|i| match ((i / 4) % 2, i % 2) {
+                (0, 0) => r,
+                (1, 1) => b,
+                _ => g,
+            })
+            .collect();
+        let msg = ImageMsg {
+            payload: ImagePayload::Raw {
+                width: 4,
+                height: 4,
+                encoding: "bayer_rggb8".into(),
+                step: 4,
+                big_endian: false,
+                data: mosaic,
+            },
+            ..raw("bayer_rggb8", 4, 1, vec![])
+        };
+        gray_from_image_into(&msg, "/c", &mut gray).unwrap();
+        assert_eq!(gray.size(), ImageSize::new(4, 4));
+        assert!(gray
+            .as_slice()
+            .iter()
+            .all(|v| (v - expected.get(0, 0)).abs() < 1e-6));
+    }
+
+    fn compressed_depth(format: &str, header: [f32; 2], payload: Vec<u8>) -> ImageMsg {
+        let mut data = vec![0u8; 4];
+        data.extend_from_slice(&header[0].to_le_bytes());
+        data.extend_from_slice(&header[1].to_le_bytes());
+        data.extend(payload);
+        ImageMsg {
+            timestamp_ns: 1,
+            frame_id: "cam".into(),
+            payload: ImagePayload::Compressed {
+                format: format.into(),
+                data,
+            },
+        }
+    }
+
+    #[test]
+    fn compressed_depth_rvl_and_inverse_depth_decode() {
+        let values: Vec<u16> = vec![1500, 0, 1502, 1498, 0, 0];
+        let mut payload = Vec::new();
+        payload.extend_from_slice(&3u32.to_le_bytes());
+        payload.extend_from_slice(&2u32.to_le_bytes());
+        payload.extend(pixels::encode_rvl(&values));
+        let msg = compressed_depth("16UC1; compressedDepth rvl", [0.0, 0.0], payload.clone());
+        assert!(msg.is_depth());
+        let mut d = DepthMeters::filled(ImageSize::new(1, 1), 9.0);
+        depth_from_image_into(&msg, "/d", 1000.0, &mut d).unwrap();
+        let mut reference = DepthMeters::filled(ImageSize::new(3, 2), 0.0);
+        crate::image_buf::depth_m_from_u16_into(&values, 1000.0, &mut reference).unwrap();
+        assert_eq!(d, reference);
+        // 32FC1: quantised inverse depth, depth = a / (q − b); q = 0 is invalid.
+        let msg = compressed_depth("32FC1; compressedDepth rvl", [3000.0, -0.5], payload);
+        depth_from_image_into(&msg, "/d", 1000.0, &mut d).unwrap();
+        assert!((d.get(0, 0) - 3000.0 / 1500.5).abs() < 1e-5 && d.get(1, 0) == 0.0);
+        // A size the stream cannot hold is refused before allocating.
+        let mut huge = Vec::new();
+        huge.extend_from_slice(&100_000u32.to_le_bytes());
+        huge.extend_from_slice(&100_000u32.to_le_bytes());
+        huge.extend_from_slice(&[0; 8]);
+        let err = depth_from_image_into(
+            &compressed_depth("16UC1; compressedDepth rvl", [0.0; 2], huge),
+            "/d",
+            1.0,
+            &mut d,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("100000x100000") && err.contains("/d"), "{err}");
+        let short = compressed_depth("16UC1; compressedDepth rvl", [0.0; 2], vec![1, 2]);
+        assert!(depth_from_image_into(&short, "/d", 1.0, &mut d).is_err());
+    }
+
+    #[test]
     fn compressed_depth_png_skips_its_config_header() {
         let raw = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(2, 1, vec![1500, 0]).unwrap();
         let mut png = std::io::Cursor::new(Vec::new());
@@ -864,11 +1191,11 @@ mod tests {
     #[test]
     fn unsupported_encodings_are_named() {
         let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
-        let err = gray_from_image_into(&raw("yuv422", 2, 2, vec![0; 4]), "/c", &mut g)
+        let err = gray_from_image_into(&raw("nv12", 2, 2, vec![0; 4]), "/c", &mut g)
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("yuv422") && err.contains("rgb8") && err.contains("/c"),
+            err.contains("nv12") && err.contains("rgb8") && err.contains("/c"),
             "{err}"
         );
         let mut d = DepthMeters::filled(ImageSize::new(1, 1), 0.0);

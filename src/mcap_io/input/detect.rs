@@ -20,6 +20,8 @@ pub struct TopicOverrides {
     pub depth: Option<String>,
     /// `--camera-info-topic`.
     pub camera_info: Option<String>,
+    /// `--depth-camera-info-topic`.
+    pub depth_camera_info: Option<String>,
     /// `--pose-topic`.
     pub pose: Option<String>,
 }
@@ -31,8 +33,11 @@ pub struct RgbdTopics {
     pub color: InputChannel,
     /// Depth images.
     pub depth: InputChannel,
-    /// Calibration, if any was found.
+    /// Calibration of the colour camera, if any was found.
     pub calibration: Option<InputChannel>,
+    /// Calibration of the depth camera: the calibration channel beside the depth topic when it
+    /// is another than [`Self::calibration`] (or `--depth-camera-info-topic`).
+    pub depth_calibration: Option<InputChannel>,
     /// External poses (`--pose-topic`).
     pub pose: Option<InputChannel>,
 }
@@ -73,7 +78,8 @@ fn no_rgbd(input: &McapInput, what: &str) -> Error {
         path: input.path().to_owned(),
         message: format!(
             "{what}; supported image schemas are foxglove.RawImage/foxglove.CompressedImage \
-             (protobuf or json) and sensor_msgs/msg/Image/CompressedImage (cdr); {}",
+             (protobuf or json), sensor_msgs/msg/Image/CompressedImage (ROS 2, cdr) and \
+             sensor_msgs/Image/CompressedImage (ROS 1, ros1); {}",
             describe_channels(input)
         ),
     }
@@ -95,7 +101,7 @@ fn by_topic<'a>(
             path: input.path().to_owned(),
             message: format!(
                 "{flag} {topic}: schema {:?} with message encoding {:?} is not supported here \
-                 (expected one of {want:?} as Foxglove protobuf/json or ROS 2 cdr)",
+                 (expected one of {want:?} as Foxglove protobuf/json, ROS 2 cdr or ROS 1)",
                 channel.schema_name, channel.message_encoding
             ),
         }),
@@ -197,6 +203,21 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
             )
         })?,
     };
+    let calibrations: Vec<&InputChannel> = input
+        .channels()
+        .values()
+        .filter(|c| {
+            c.channel_type
+                .is_some_and(|ct| ct.message == MessageType::Calibration)
+        })
+        .filter(|c| c.message_count != Some(0))
+        .collect();
+    let same_ns = |topic: &str| {
+        calibrations
+            .iter()
+            .copied()
+            .find(|c| namespace(&c.topic) == namespace(topic))
+    };
     let calibration = match &overrides.camera_info {
         Some(t) => Some(by_topic(
             input,
@@ -204,26 +225,18 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
             "--camera-info-topic",
             &[MessageType::Calibration],
         )?),
-        None => {
-            let calibrations: Vec<&InputChannel> = input
-                .channels()
-                .values()
-                .filter(|c| {
-                    c.channel_type
-                        .is_some_and(|ct| ct.message == MessageType::Calibration)
-                })
-                .filter(|c| c.message_count != Some(0))
-                .collect();
-            let same_ns = |topic: &str| {
-                calibrations
-                    .iter()
-                    .copied()
-                    .find(|c| namespace(&c.topic) == namespace(topic))
-            };
-            same_ns(&color.topic)
-                .or_else(|| same_ns(&depth.topic))
-                .or_else(|| (calibrations.len() == 1).then(|| calibrations[0]))
-        }
+        None => same_ns(&color.topic)
+            .or_else(|| same_ns(&depth.topic))
+            .or_else(|| (calibrations.len() == 1).then(|| calibrations[0])),
+    };
+    let depth_calibration = match &overrides.depth_camera_info {
+        Some(t) => Some(by_topic(
+            input,
+            t,
+            "--depth-camera-info-topic",
+            &[MessageType::Calibration],
+        )?),
+        None => same_ns(&depth.topic).filter(|c| calibration.is_none_or(|colour| colour.id != c.id)),
     };
     let pose = match &overrides.pose {
         Some(t) => Some(by_topic(
@@ -242,6 +255,7 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
         color: color.clone(),
         depth: depth.clone(),
         calibration: calibration.cloned(),
+        depth_calibration: depth_calibration.cloned(),
         pose: pose.cloned(),
     })
 }

@@ -1,4 +1,5 @@
-//! Reading any RGB-D MCAP file: Foxglove schemas in protobuf or JSON, ROS 2 messages in CDR.
+//! Reading any RGB-D MCAP file: Foxglove schemas in protobuf or JSON, ROS 2 messages in CDR,
+//! ROS 1 messages (`ros1` profile, bags converted to MCAP).
 //!
 //! [`McapInput`] opens a file with bounded memory: when the file has a summary with chunk
 //! indexes, messages are read chunk by chunk in log-time order through
@@ -8,13 +9,18 @@
 //!
 //! - [`decode`]: channel classification and decoders for every supported flavour;
 //! - [`detect`]: choosing colour, depth, calibration and pose topics by schema;
-//! - [`ros2`], [`json`]: the serde layouts of ROS 2 (CDR) and Foxglove JSON messages.
+//! - [`transforms`]: fixed transforms between frames (`/tf_static`, `/tf`);
+//! - [`ros2`], [`ros1`], [`json`]: the serde layouts of ROS 2 (CDR), ROS 1 and Foxglove JSON
+//!   messages.
 
 mod cdr_read;
 pub mod decode;
 pub mod detect;
 pub mod json;
+pub mod pixels;
+pub mod ros1;
 pub mod ros2;
+pub mod transforms;
 
 use std::collections::BTreeMap;
 use std::fs::File;

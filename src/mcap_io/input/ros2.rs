@@ -219,4 +219,15 @@ pub mod schema_text {
              MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n"
         )
     }
+
+    /// `tf2_msgs/msg/TFMessage`.
+    pub fn tf_message() -> String {
+        format!(
+            "geometry_msgs/TransformStamped[] transforms\n{SEP}MSG: geometry_msgs/TransformStamped\n\
+             std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n{SEP}{HEADER}\
+             {SEP}{TIME}{SEP}MSG: geometry_msgs/Transform\ngeometry_msgs/Vector3 translation\n\
+             geometry_msgs/Quaternion rotation\n{SEP}MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\n\
+             float64 z\n{SEP}MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n"
+        )
+    }
 }
