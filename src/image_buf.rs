@@ -54,6 +54,18 @@ pub type Rgb8 = Image<[u8; 3]>;
 /// Value of a set pixel in a [`Mask`] (255, so a mask is a viewable `mono8` image).
 pub const MASK_SET: u8 = 255;
 
+/// The 8 neighbours of a pixel as (dx, dy), row by row.
+pub(crate) const NEIGHBOURS_8: [(isize, isize); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
 impl<T: Copy> Image<T> {
     /// An image of `size` filled with `value`.
     pub fn filled(size: ImageSize, value: T) -> Self {

@@ -97,6 +97,19 @@ pub struct IgnoreCompletion {
 
 const UNLABELLED: u32 = u32::MAX;
 
+/// The 4-neighbours of cell `i` inside a `w` × `h` grid.
+fn neighbours_4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = (i % w, i / w);
+    [
+        (x > 0).then(|| i - 1),
+        (x + 1 < w).then_some(i + 1),
+        (y > 0).then(|| i - w),
+        (y + 1 < h).then_some(i + w),
+    ]
+    .into_iter()
+    .flatten()
+}
+
 impl IgnoreCompletion {
     /// State for `size` images.
     ///
@@ -217,14 +230,8 @@ impl IgnoreCompletion {
                 if self.depth_m[i] > 0.0 {
                     self.depths.push(self.depth_m[i]);
                 }
-                let (x, y) = (i % w, i / w);
-                for (j, inside) in [
-                    (i.wrapping_sub(1), x > 0),
-                    (i + 1, x + 1 < w),
-                    (i.wrapping_sub(w), y > 0),
-                    (i + w, y + 1 < h),
-                ] {
-                    if inside && self.set[j] && self.labels[j] == UNLABELLED {
+                for j in neighbours_4(i, w, h) {
+                    if self.set[j] && self.labels[j] == UNLABELLED {
                         self.labels[j] = label;
                         self.queue.push(j as u32);
                     }
@@ -259,14 +266,8 @@ impl IgnoreCompletion {
             let label = self.labels[i];
             let median = self.medians[label as usize];
             let z = depth[i];
-            let (x, y) = (i % w, i / w);
-            for (j, inside) in [
-                (i.wrapping_sub(1), x > 0),
-                (i + 1, x + 1 < w),
-                (i.wrapping_sub(w), y > 0),
-                (i + w, y + 1 < h),
-            ] {
-                if !inside || set[j] {
+            for j in neighbours_4(i, w, h) {
+                if set[j] {
                     continue;
                 }
                 let zj = depth[j];

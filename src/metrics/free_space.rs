@@ -37,7 +37,8 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
-use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET};
+use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET, NEIGHBOURS_8};
+use crate::occlusion::runs::RunLabelling;
 
 /// Parameters of [`free_space_reference`] (defaults: the reference used for the Bonn "crowd"
 /// window, 640×480 at 30 Hz).
@@ -343,53 +344,17 @@ fn square_filter(mask: &[bool], size: ImageSize, radius: usize, all: bool) -> Ve
     out
 }
 
-/// Removes 8-connected components smaller than `min_pixels`.
+/// Removes 8-connected components smaller than `min_pixels` (the detector's run labelling).
 fn drop_small_components(mask: &mut [bool], size: ImageSize, min_pixels: usize) {
-    let (w, h) = (size.width, size.height);
-    let mut seen = vec![false; mask.len()];
-    let mut component = Vec::new();
-    for start in 0..mask.len() {
-        if !mask[start] || seen[start] {
-            continue;
-        }
-        component.clear();
-        component.push(start);
-        seen[start] = true;
-        let mut head = 0;
-        while head < component.len() {
-            let i = component[head];
-            head += 1;
-            let (x, y) = ((i % w) as isize, (i / w) as isize);
-            for (dx, dy) in NEIGHBOURS_8 {
-                let (nx, ny) = (x + dx, y + dy);
-                if nx < 0 || ny < 0 || nx >= w as isize || ny >= h as isize {
-                    continue;
-                }
-                let n = ny as usize * w + nx as usize;
-                if mask[n] && !seen[n] {
-                    seen[n] = true;
-                    component.push(n);
-                }
-            }
-        }
-        if component.len() < min_pixels {
-            for &i in &component {
-                mask[i] = false;
-            }
+    let set: Vec<u8> = mask.iter().map(|&m| u8::from(m)).collect();
+    let mut labelling = RunLabelling::new(size.width, size.height);
+    let components = labelling.label(&set, size.width, size.width, size.height, (0, 0));
+    for k in (0..components).filter(|&k| labelling.pixels(k) < min_pixels) {
+        for run in labelling.runs(k) {
+            mask[run.pixels(size.width)].fill(false);
         }
     }
 }
-
-const NEIGHBOURS_8: [(isize, isize); 8] = [
-    (-1, -1),
-    (0, -1),
-    (1, -1),
-    (-1, 0),
-    (1, 0),
-    (-1, 1),
-    (0, 1),
-    (1, 1),
-];
 
 /// Step 4: synchronous rings (each ring decides from the region as it was before the ring),
 /// visiting only the unset neighbours of the previous ring.

@@ -13,18 +13,8 @@ use crate::image_buf::{DepthMeters, Image, ImageSize, Mask};
 const UNLABELLED: u32 = u32::MAX;
 
 const NEIGHBOURS_4: [(isize, isize); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
-/// The 8 neighbours as (dx, dy).
 #[cfg(test)]
-pub(super) const NEIGHBOURS_8: [(isize, isize); 8] = [
-    (-1, -1),
-    (0, -1),
-    (1, -1),
-    (-1, 0),
-    (1, 0),
-    (-1, 1),
-    (0, 1),
-    (1, 1),
-];
+pub(super) use crate::image_buf::NEIGHBOURS_8;
 
 /// Counts of one labelling/prediction pass.
 #[derive(Debug, Clone, Copy, Default)]

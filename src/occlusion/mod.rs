@@ -36,7 +36,7 @@
 mod components;
 pub mod consistency;
 mod growth;
-mod runs;
+pub(crate) mod runs;
 pub mod transport;
 
 use std::time::Instant;

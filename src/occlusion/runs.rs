@@ -12,7 +12,7 @@ use super::components::{position_nonzero_u8, position_zero_u8};
 
 /// One horizontal run of set pixels in image coordinates: row `y`, columns `x0..x1`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) struct Run {
+pub(crate) struct Run {
     pub y: u32,
     pub x0: u32,
     /// One past the last column.
@@ -36,7 +36,7 @@ impl Run {
 
 /// Run-based labelling with preallocated buffers (reused from frame to frame).
 #[derive(Debug, Clone)]
-pub(super) struct RunLabelling {
+pub(crate) struct RunLabelling {
     /// Every run, row-major.
     runs: Vec<Run>,
     /// Union-find parent per run; after labelling, the component of each run.
