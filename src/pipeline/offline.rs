@@ -23,10 +23,11 @@
 //!    of each frame's predecessor as well as its own; otherwise with the first pass's (or the
 //!    external) poses. A frame's mask is the refinement pass's ∪ the backward pass's.
 //!
-//! Frames are emitted in order, a block at a time, so results lag the input by up to
-//! `block_frames + lookahead_frames` frames, and that many frames are buffered (gray as u16,
-//! depth as f32, two masks: 2.4 MB per 640×480 frame). Buffers are recycled: after the first
-//! block nothing is allocated per frame.
+//! Pass 1 of a new frame runs beside passes 2 and 3 of earlier ones (see [`OfflineProcessor`]).
+//! Frames are emitted in order, a block's worth spread over the pushes until the next backward
+//! pass, so results lag the input by up to `block_frames + lookahead_frames` frames, and that
+//! many frames are buffered (gray as u16, depth as f32, two masks: 2.4 MB per 640×480 frame).
+//! Buffers are recycled: after the first block nothing is allocated per frame.
 
 use std::collections::VecDeque;
 
@@ -121,21 +122,48 @@ struct Buffered {
     backward_mask: Mask,
 }
 
+/// Where a frame's result goes: called in frame order, from whichever of the pool's threads
+/// runs the refinement pass (hence `Send`).
+pub type Emit<'e> = dyn FnMut(FrameOutput<'_>) -> Result<()> + Send + 'e;
+
 /// Sequence processor of the offline mode (see the module docs).
+///
+/// Pass 1 is a chain over the frames as they arrive; the backward and refinement passes are a
+/// second chain over the frames that pass 1 has finished. [`Self::push`] runs the two side by
+/// side (`rayon::join`): the new frame's pass 1 on one thread, and on another the backward pass
+/// that the previous frame made due plus the refinement of a share of the frames waiting for it.
+/// Both chains keep their order, so the results are those of running the passes one after the
+/// other; only the time differs (on one thread, `join` runs them in turn).
 pub struct OfflineProcessor {
     config: OfflineConfig,
+    size: ImageSize,
+    first: FirstPass,
+    later: LaterPasses,
+}
+
+/// Pass 1.
+struct FirstPass {
+    /// `None` with external poses.
+    processor: Option<Processor>,
     source: PoseSource,
     /// External poses: the marker's pose in the camera.
     marker_from_camera: Isometry3<f64>,
     min_valid_depth_fraction: f64,
+}
+
+/// Passes 2 and 3, and the frames they work on.
+struct LaterPasses {
+    source: PoseSource,
     appearance_growth: bool,
-    /// Pass 1 (`None` with external poses).
-    first: Option<Processor>,
     /// Pass 2.
     backward: OcclusionDetector,
     /// Pass 3.
     refine: Processor,
+    /// Frames after pass 1 whose backward pass has not run: the next block and its look-ahead.
     buffer: VecDeque<Buffered>,
+    /// Frames after the backward pass, waiting for refinement (in order).
+    ready: VecDeque<Buffered>,
+    /// Recycled frame buffers.
     spare: Vec<Buffered>,
     size: ImageSize,
     /// Scratch: a buffered frame's gray as f32.
@@ -199,52 +227,92 @@ impl OfflineProcessor {
         };
         Ok(Self {
             config: offline,
-            source: config.pose_source,
-            marker_from_camera,
-            min_valid_depth_fraction: config.failure.min_valid_depth_fraction,
-            appearance_growth: config.occlusion.appearance_growth.is_some(),
-            first,
-            backward: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
-            refine: Processor::new(size, intrinsics, refine)?,
-            buffer: VecDeque::new(),
-            spare: Vec::new(),
             size,
-            gray: GrayF32::filled(size, 0.0),
-            mask: Mask::filled(size, 0),
-            previous_seed_mask: Mask::filled(size, 0),
-            has_previous_seed_mask: false,
+            first: FirstPass {
+                processor: first,
+                source: config.pose_source,
+                marker_from_camera,
+                min_valid_depth_fraction: config.failure.min_valid_depth_fraction,
+            },
+            later: LaterPasses {
+                source: config.pose_source,
+                appearance_growth: config.occlusion.appearance_growth.is_some(),
+                backward: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
+                refine: Processor::new(size, intrinsics, refine)?,
+                buffer: VecDeque::new(),
+                ready: VecDeque::new(),
+                spare: Vec::new(),
+                size,
+                gray: GrayF32::filled(size, 0.0),
+                mask: Mask::filled(size, 0),
+                previous_seed_mask: Mask::filled(size, 0),
+                has_previous_seed_mask: false,
+            },
         })
     }
 
     /// Frames pushed but not yet emitted.
     pub fn pending_frames(&self) -> usize {
-        self.buffer.len()
+        self.later.buffer.len() + self.later.ready.len()
     }
 
     /// Adds the next frame (frames in time order). Calls `emit` for every frame whose result
-    /// is final now, in order: none until a block and its look-ahead are buffered, then a
-    /// block's worth.
+    /// is final now, in order: none until a block and its look-ahead are buffered, then a share
+    /// of a block's frames at every push, so that a block is emitted by the time the next one's
+    /// look-ahead is buffered.
     ///
     /// # Errors
     /// As [`Processor::process`], and whatever `emit` returns.
-    pub fn push(
-        &mut self,
-        frame: &FrameInput<'_>,
-        emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>,
-    ) -> Result<()> {
+    pub fn push(&mut self, frame: &FrameInput<'_>, emit: &mut Emit<'_>) -> Result<()> {
         check_size("gray image", frame.gray.size(), self.size)?;
         check_size("depth image", frame.depth_m.size(), self.size)?;
-        let mut buffered = self.spare.pop().unwrap_or_else(|| Buffered {
+        let mut buffered = self.later.spare.pop().unwrap_or_else(|| Buffered::new(self.size));
+        let (first, later, config) = (&mut self.first, &mut self.later, &self.config);
+        let (first_done, later_done) = rayon::join(
+            || first.run(frame, &mut buffered),
+            || later.work_beside_first_pass(config, emit),
+        );
+        later_done?;
+        first_done?;
+        self.later.buffer.push_back(buffered);
+        Ok(())
+    }
+
+    /// Finishes every buffered frame (the end of the sequence), calling `emit` for each.
+    ///
+    /// # Errors
+    /// As [`Self::push`].
+    pub fn finish(&mut self, emit: &mut Emit<'_>) -> Result<()> {
+        let later = &mut self.later;
+        later.refine_ready(later.ready.len(), emit)?;
+        while !later.buffer.is_empty() {
+            let n = self.config.block_frames.min(later.buffer.len());
+            later.backward_pass(n)?;
+            later.refine_ready(later.ready.len(), emit)?;
+        }
+        Ok(())
+    }
+}
+
+impl Buffered {
+    fn new(size: ImageSize) -> Self {
+        Self {
             timestamp_ns: 0,
-            gray: Image::filled(self.size, 0),
-            depth_m: DepthMeters::filled(self.size, 0.0),
+            gray: Image::filled(size, 0),
+            depth_m: DepthMeters::filled(size, 0.0),
             world_from_marker: None,
             world_from_camera: Isometry3::identity(),
-            first_mask: Mask::filled(self.size, 0),
+            first_mask: Mask::filled(size, 0),
             first_reset: false,
             has_depth: false,
-            backward_mask: Mask::filled(self.size, 0),
-        });
+            backward_mask: Mask::filled(size, 0),
+        }
+    }
+}
+
+impl FirstPass {
+    /// Pass 1 for `frame`, into `buffered`.
+    fn run(&mut self, frame: &FrameInput<'_>, buffered: &mut Buffered) -> Result<()> {
         buffered.timestamp_ns = frame.timestamp_ns;
         for (q, &g) in buffered.gray.as_mut_slice().iter_mut().zip(frame.gray.as_slice()) {
             *q = quantize_gray(g);
@@ -255,7 +323,7 @@ impl OfflineProcessor {
             .copy_from_slice(frame.depth_m.as_slice());
         buffered.world_from_marker = frame.world_from_marker.copied();
         buffered.has_depth = valid_depth_fraction(frame.depth_m) >= self.min_valid_depth_fraction;
-        match &mut self.first {
+        match &mut self.processor {
             Some(first) => {
                 let out = first.process(&FrameInput {
                     ignore_in_previous: None,
@@ -287,42 +355,26 @@ impl OfflineProcessor {
                 buffered.first_reset = false;
             }
         }
-        self.buffer.push_back(buffered);
-        if self.buffer.len() >= self.config.block_frames + self.config.lookahead_frames {
-            self.finish_block(self.config.block_frames, emit)?;
-        }
         Ok(())
     }
+}
 
-    /// Finishes every buffered frame (the end of the sequence), calling `emit` for each.
-    ///
-    /// # Errors
-    /// As [`Self::push`].
-    pub fn finish(&mut self, emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>) -> Result<()> {
-        while !self.buffer.is_empty() {
-            let n = self.config.block_frames.min(self.buffer.len());
-            self.finish_block(n, emit)?;
+impl LaterPasses {
+    /// The work that runs beside one new frame's pass 1: the backward pass once a block and its
+    /// look-ahead are buffered, and the refinement of the waiting frames spread evenly over the
+    /// pushes until the next backward pass is due.
+    fn work_beside_first_pass(&mut self, config: &OfflineConfig, emit: &mut Emit<'_>) -> Result<()> {
+        let window = config.block_frames + config.lookahead_frames;
+        if self.buffer.len() >= window {
+            self.backward_pass(config.block_frames)?;
         }
-        Ok(())
+        // This push and the ones after it until the buffer is full again.
+        let pushes_left = window.saturating_sub(self.buffer.len()).max(1);
+        self.refine_ready(self.ready.len().div_ceil(pushes_left), emit)
     }
 
-    /// The backward pass over everything buffered, then the refinement pass and `emit` for the
-    /// first `n` frames, which are then recycled.
-    fn finish_block(&mut self, n: usize, emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>) -> Result<()> {
-        self.backward_pass(n)?;
-        for _ in 0..n {
-            let Some(frame) = self.buffer.pop_front() else {
-                break;
-            };
-            let result = self.refine_and_emit(&frame, emit);
-            self.spare.push(frame);
-            result?;
-        }
-        Ok(())
-    }
-
-    /// Pass 2: a fresh detector from the last buffered frame back to the first; the masks of
-    /// the first `n` frames are kept.
+    /// Pass 2: a fresh detector from the last buffered frame back to the first; the first `n`
+    /// frames, their backward masks kept, then wait for refinement.
     fn backward_pass(&mut self, n: usize) -> Result<()> {
         self.backward.reset();
         // The pose of the detector's previous frame (the later one in time).
@@ -359,15 +411,26 @@ impl OfflineProcessor {
             }
             reference = Some(frame.world_from_camera);
         }
+        let n = n.min(self.buffer.len());
+        self.ready.extend(self.buffer.drain(..n));
+        Ok(())
+    }
+
+    /// Pass 3 and `emit` for the first `count` waiting frames, which are then recycled.
+    fn refine_ready(&mut self, count: usize, emit: &mut Emit<'_>) -> Result<()> {
+        for _ in 0..count {
+            let Some(frame) = self.ready.pop_front() else {
+                break;
+            };
+            let result = self.refine_and_emit(&frame, emit);
+            self.spare.push(frame);
+            result?;
+        }
         Ok(())
     }
 
     /// Pass 3 for one frame, then `emit` with the refinement ∪ backward mask.
-    fn refine_and_emit(
-        &mut self,
-        frame: &Buffered,
-        emit: &mut dyn FnMut(FrameOutput<'_>) -> Result<()>,
-    ) -> Result<()> {
+    fn refine_and_emit(&mut self, frame: &Buffered, emit: &mut Emit<'_>) -> Result<()> {
         dequantize_gray_into(&frame.gray, &mut self.gray);
         let closed_loop = self.source == PoseSource::DvoClosedLoop;
         let replayed_pose = match self.source {
@@ -428,5 +491,152 @@ fn quantize_gray(g: f32) -> u16 {
 fn dequantize_gray_into(q: &Image<u16>, gray: &mut GrayF32) {
     for (g, &v) in gray.as_mut_slice().iter_mut().zip(q.as_slice()) {
         *g = f32::from(v) / 65535.0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
+
+    /// What a run emits: per frame its index, stamp, pose and mask.
+    type Emitted = Vec<(u64, u64, Isometry3<f64>, Mask)>;
+
+    /// The closed loop, offline, over `frames` frames of a crossing box at 160×120 with short
+    /// blocks (so that several backward passes and a partial last block occur), on a pool of
+    /// `threads` threads.
+    fn run(threads: usize, frames: usize, offline: OfflineConfig) -> Emitted {
+        let size = ImageSize::new(160, 120);
+        let sequence = SyntheticSequence::new(
+            Scenario::TwoObjectsCrossing,
+            SequenceConfig {
+                size,
+                frame_count: Some(frames),
+                ..SequenceConfig::default()
+            },
+        );
+        let config = ProcessorConfig {
+            offline,
+            ..ProcessorConfig::default()
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a test pool");
+        pool.install(|| {
+            let mut processor =
+                OfflineProcessor::new(size, sequence.config.intrinsics(), config).expect("valid config");
+            let mut emitted = Emitted::new();
+            let mut keep = |out: FrameOutput<'_>| {
+                emitted.push((
+                    out.index,
+                    out.timestamp_ns,
+                    out.world_from_camera,
+                    out.mask.clone(),
+                ));
+                Ok(())
+            };
+            for i in 0..frames {
+                let frame = sequence.frame(i);
+                processor
+                    .push(
+                        &FrameInput {
+                            timestamp_ns: frame.timestamp_ns,
+                            gray: &frame.gray,
+                            depth_m: &frame.depth_m,
+                            world_from_marker: None,
+                            ignore_in_previous: None,
+                        },
+                        &mut keep,
+                    )
+                    .expect("push");
+            }
+            processor.finish(&mut keep).expect("finish");
+            assert_eq!(processor.pending_frames(), 0);
+            emitted
+        })
+    }
+
+    fn short_blocks() -> OfflineConfig {
+        OfflineConfig {
+            block_frames: 7,
+            lookahead_frames: 4,
+            ..OfflineConfig::default()
+        }
+    }
+
+    #[test]
+    fn passes_side_by_side_give_the_results_of_one_thread() {
+        let frames = 40;
+        let one = run(1, frames, short_blocks());
+        let two = run(2, frames, short_blocks());
+        // Every frame once, in order.
+        let indices: Vec<u64> = one.iter().map(|e| e.0).collect();
+        assert_eq!(indices, (0..frames as u64).collect::<Vec<_>>());
+        assert_eq!(one.len(), two.len());
+        for (a, b) in one.iter().zip(&two) {
+            assert_eq!((a.0, a.1), (b.0, b.1));
+            assert_eq!(a.2, b.2, "pose of frame {}", a.0);
+            assert!(a.3 == b.3, "mask of frame {}", a.0);
+        }
+        // The detector found the boxes (the comparison is not between empty masks).
+        assert!(one.iter().any(|e| e.3.as_slice().iter().any(|&m| m != 0)));
+    }
+
+    #[test]
+    fn emits_a_block_over_the_pushes_until_the_next_backward_pass() {
+        // Results lag by at most a block and its look-ahead, and nothing is emitted before the
+        // first backward pass.
+        let config = short_blocks();
+        let size = ImageSize::new(160, 120);
+        let sequence = SyntheticSequence::new(
+            Scenario::StaticScene,
+            SequenceConfig {
+                size,
+                frame_count: Some(30),
+                ..SequenceConfig::default()
+            },
+        );
+        let mut processor = OfflineProcessor::new(
+            size,
+            sequence.config.intrinsics(),
+            ProcessorConfig {
+                offline: config,
+                ..ProcessorConfig::default()
+            },
+        )
+        .expect("valid config");
+        let window = config.block_frames + config.lookahead_frames;
+        let mut emitted = 0usize;
+        for i in 0..30 {
+            let frame = sequence.frame(i);
+            let mut count = |_: FrameOutput<'_>| {
+                emitted += 1;
+                Ok(())
+            };
+            processor
+                .push(
+                    &FrameInput {
+                        timestamp_ns: frame.timestamp_ns,
+                        gray: &frame.gray,
+                        depth_m: &frame.depth_m,
+                        world_from_marker: None,
+                        ignore_in_previous: None,
+                    },
+                    &mut count,
+                )
+                .expect("push");
+            let pushed = i + 1;
+            if pushed <= window {
+                assert_eq!(emitted, 0, "after {pushed} frames");
+            }
+            assert!(
+                pushed - emitted <= window,
+                "after {pushed} frames, {emitted} emitted"
+            );
+            assert_eq!(processor.pending_frames(), pushed - emitted);
+        }
+        processor.finish(&mut |_| Ok(())).expect("finish");
+        assert_eq!(processor.pending_frames(), 0);
     }
 }
