@@ -8,10 +8,10 @@
 // A benchmark's setup failing is a bug in the benchmark: panicking is the right report.
 #![allow(clippy::unwrap_used)]
 
-#[path = "../tests/common/tum.rs"]
+#[path = "../tests/integration/common/tum.rs"]
 mod tum;
 
-#[path = "../tests/common/data.rs"]
+#[path = "../tests/integration/common/data.rs"]
 mod data;
 
 use std::hint::black_box;
@@ -24,9 +24,9 @@ use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
 use occmask::pyramid::ImagePyramid;
 
 fn frames() -> [(GrayF32, DepthMeters); 2] {
-    if let Ok((paths, _)) = tum::load_sequence(&data::tum_fixture()) {
-        if let (Ok(a), Ok(b)) = (tum::load_frame(&paths[8]), tum::load_frame(&paths[9])) {
-            return [a, b];
+    if let Ok(sequence) = tum::TumSequence::load(&data::tum_fixture()) {
+        if let (Ok(a), Ok(b)) = (sequence.frame(8), sequence.frame(9)) {
+            return [(a.gray, a.depth_m), (b.gray, b.depth_m)];
         }
     }
     eprintln!("fixtures/tum_fr2_desk_10 not found: benchmarking a generated scene");

@@ -14,19 +14,22 @@
 // A diagnosis tool: a failing setup is a bug worth a panic.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+#[path = "../tests/integration/common/tum.rs"]
+mod tum;
+
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 use occmask::dvo::DvoStatus;
 use occmask::geometry::PinholeIntrinsics;
-use occmask::image_buf::{depth_m_from_u16_into, gray_from_rgb8, DepthMeters, Image, ImageSize, Mask};
+use occmask::image_buf::{DepthMeters, Image, ImageSize, Mask};
 use occmask::metrics::{rpe, FrameCounts, SegmentationTally};
 use occmask::occlusion::consistency::depth_consistency;
 use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector, OcclusionStats};
 use occmask::pipeline::{FrameInput, PoseSource, Processor, ProcessorConfig};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
-use occmask::time::parse_seconds_to_ns;
-use occmask::trajectory::{interpolate, parse_tum_line, StampedPose};
+use occmask::trajectory::interpolate;
+use tum::TumSequence;
 
 /// The default config with overrides from the environment (for experiments):
 /// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0/1
@@ -235,49 +238,24 @@ fn synthetic(scenario: Scenario, dvo: bool, frames: bool, dump_dir: Option<&Path
     );
 }
 
-fn list(dir: &Path, file: &str) -> Vec<(u64, PathBuf)> {
-    std::fs::read_to_string(dir.join(file))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| {
-            let mut fields = l.split_whitespace();
-            let t = parse_seconds_to_ns(fields.next().unwrap()).unwrap();
-            (t, dir.join(fields.next().unwrap()))
-        })
-        .collect()
-}
-
-/// The TUM-format `groundtruth.txt` of a sequence folder.
-fn ground_truth(dir: &Path) -> Vec<StampedPose> {
-    std::fs::read_to_string(dir.join("groundtruth.txt"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| parse_tum_line(l).unwrap())
-        .collect()
-}
-
 fn real(dir: &Path, intrinsics: PinholeIntrinsics, frames: bool, dump_dir: Option<&Path>) {
-    let truth = ground_truth(dir);
+    let sequence = TumSequence::load(dir).unwrap();
+    let truth = sequence.groundtruth();
     let mut detector = OcclusionDetector::new(SIZE, intrinsics, detector_config()).unwrap();
-    let mut depth = Image::filled(SIZE, 0.0f32);
     let mut previous: Option<Isometry3<f64>> = None;
     let mut previous_depth = Image::filled(SIZE, 0.0f32);
     let mut min_consistency: f64 = 1.0;
     let mut fractions = Vec::new();
     let mut rejected = Vec::new();
-    let rgb_files = list(dir, "rgb.txt");
-    for (t, path) in list(dir, "depth.txt") {
-        let Some(world_from_camera) = interpolate(&truth, t, MAX_GT_GAP_NS) else {
+    // Each depth frame with the nearest colour image (7-Scenes: not registered to the depth; a
+    // gate only).
+    for pair in sequence.depth_with_nearest_color() {
+        let t = sequence.sequence.depth[pair.depth].timestamp_ns;
+        let Some(world_from_camera) = interpolate(truth, t, MAX_GT_GAP_NS) else {
             continue;
         };
-        // The nearest colour image (7-Scenes: not registered to the depth; a gate only).
-        let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
-        let rgb = image::open(rgb_path).unwrap().into_rgb8();
-        let gray = gray_from_rgb8(&Image::from_vec(SIZE, rgb.pixels().map(|p| p.0).collect()).unwrap());
-        let image = image::open(&path).unwrap().into_luma16();
-        depth_m_from_u16_into(image.as_raw(), 5000.0, &mut depth).unwrap();
+        let frame = sequence.decode(&pair).unwrap();
+        let (gray, depth) = (frame.gray, frame.depth_m);
         let motion = previous.map_or_else(Isometry3::identity, |p| world_from_camera.inverse() * p);
         previous = Some(world_from_camera);
         let consistency = depth_consistency(&intrinsics, &previous_depth, None, &depth, &motion, 4)
@@ -354,15 +332,11 @@ fn inlier_fraction(
 /// For frames `first..=last`: the inlier fraction of the ground-truth motion, of identity, of
 /// the motion interpolated halfway between the neighbours' poses, and of scaled translations.
 fn probe(dir: &Path, intrinsics: PinholeIntrinsics, first: usize, last: usize) {
-    let truth = ground_truth(dir);
-    let files = list(dir, "depth.txt");
-    let load = |i: usize| {
-        let mut depth = Image::filled(SIZE, 0.0f32);
-        let image = image::open(&files[i].1).unwrap().into_luma16();
-        depth_m_from_u16_into(image.as_raw(), 5000.0, &mut depth).unwrap();
-        depth
-    };
-    let pose = |i: usize| interpolate(&truth, files[i].0, MAX_GT_GAP_NS).unwrap();
+    let sequence = TumSequence::load(dir).unwrap();
+    let truth = sequence.groundtruth();
+    let files = sequence.depth_with_nearest_color();
+    let load = |i: usize| sequence.decode(&files[i]).unwrap().depth_m;
+    let pose = |i: usize| interpolate(truth, sequence.sequence.depth[i].timestamp_ns, MAX_GT_GAP_NS).unwrap();
     for k in first..=last {
         let (previous, current) = (load(k - 1), load(k));
         let gt = pose(k - 1).inverse() * pose(k);
@@ -395,29 +369,24 @@ fn probe(dir: &Path, intrinsics: PinholeIntrinsics, first: usize, last: usize) {
 /// The DVO closed loop on a real static sequence (gray from the nearest colour image): the
 /// false-positive fraction per frame after the warm-up.
 fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
-    let rgb_files = list(dir, "rgb.txt");
+    let sequence = TumSequence::load(dir).unwrap();
     let config = ProcessorConfig {
         occlusion: detector_config(),
         ..ProcessorConfig::default()
     };
     let mut processor = Processor::new(SIZE, intrinsics, config).unwrap();
-    let mut depth = Image::filled(SIZE, 0.0f32);
     let mut fractions = Vec::new();
     let (mut not_converged, mut resets, mut rejected) = (0, 0, 0);
-    let truth = ground_truth(dir);
+    let truth = sequence.groundtruth();
     let (mut estimated, mut reference) = (Vec::new(), Vec::new());
-    for (t, path) in list(dir, "depth.txt") {
-        let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
-        let rgb = image::open(rgb_path).unwrap().into_rgb8();
-        let pixels = rgb.pixels().map(|p| p.0).collect();
-        let gray = gray_from_rgb8(&Image::from_vec(SIZE, pixels).unwrap());
-        let image = image::open(&path).unwrap().into_luma16();
-        depth_m_from_u16_into(image.as_raw(), 5000.0, &mut depth).unwrap();
+    for pair in sequence.depth_with_nearest_color() {
+        let frame = sequence.decode(&pair).unwrap();
+        let t = frame.depth_timestamp_ns;
         let out = processor
             .process(&FrameInput {
                 timestamp_ns: t,
-                gray: &gray,
-                depth_m: &depth,
+                gray: &frame.gray,
+                depth_m: &frame.depth_m,
                 world_from_marker: None,
                 ignore_in_previous: None,
             })
@@ -426,7 +395,7 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
         resets += usize::from(out.stats.detector_reset);
         rejected += usize::from(out.stats.detector.motion_rejected);
         fractions.push(out.stats.moving_fraction);
-        if let Some(pose) = interpolate(&truth, t, MAX_GT_GAP_NS) {
+        if let Some(pose) = interpolate(truth, t, MAX_GT_GAP_NS) {
             estimated.push(out.world_from_camera);
             reference.push(pose);
         }

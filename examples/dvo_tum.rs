@@ -10,7 +10,7 @@
 //! of the new frame + estimate), on the TUM fr2 intrinsics. The summary line on stderr also
 //! gives the process CPU time per pair (all threads), which stays meaningful on a loaded machine.
 
-#[path = "../tests/common/tum.rs"]
+#[path = "../tests/integration/common/tum.rs"]
 mod tum;
 
 use std::fmt::Write as _;
@@ -56,15 +56,14 @@ fn main() -> anyhow::Result<()> {
     let dir = dir.ok_or_else(|| {
         anyhow::anyhow!("usage: dvo_tum DIR [--csv F] [--tum F] [--finest N] [--profile paper|release]")
     })?;
-    let (frames, gt) = tum::load_sequence(&dir).map_err(anyhow::Error::msg)?;
-    let images = frames
-        .iter()
-        .map(tum::load_frame)
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(anyhow::Error::msg)?;
-    let size = images
+    let sequence = tum::TumSequence::load(&dir)?;
+    let gt = sequence.groundtruth();
+    let frames = (0..sequence.pairs.len())
+        .map(|i| sequence.frame(i))
+        .collect::<Result<Vec<_>, _>>()?;
+    let size = frames
         .first()
-        .map(|(g, _)| g.size())
+        .map(|f| f.gray.size())
         .ok_or_else(|| anyhow::anyhow!("no frames"))?;
     let mut tracker = DvoTracker::new(size, presets::TUM_FR2, config)?;
     let mut csv = String::from(
@@ -77,9 +76,9 @@ fn main() -> anyhow::Result<()> {
     }];
     let (mut errs_t, mut errs_r, mut times) = (Vec::new(), Vec::new(), Vec::new());
     let cpu_start = process_cpu_s();
-    for (i, (gray, depth)) in images.iter().enumerate() {
+    for (i, frame) in frames.iter().enumerate() {
         let start = Instant::now();
-        let est = tracker.track(gray, depth, None, None)?;
+        let est = tracker.track(&frame.gray, &frame.depth_m, None, None)?;
         let ms = start.elapsed().as_secs_f64() * 1e3;
         let Some(est) = est else { continue };
         times.push(ms);
@@ -118,7 +117,7 @@ fn main() -> anyhow::Result<()> {
             q.k,
             q.w
         )?;
-        match tum::gt_motion(&gt, t_ref, t_cur) {
+        match tum::gt_motion(gt, t_ref, t_cur) {
             Some(g) => {
                 let (et, er) = tum::rpe(&m, &g);
                 errs_t.push(et);

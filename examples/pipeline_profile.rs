@@ -8,10 +8,10 @@
 // A profiling tool: a failing setup is a bug worth a panic.
 #![allow(clippy::unwrap_used)]
 
-#[path = "../tests/common/tum.rs"]
+#[path = "../tests/integration/common/tum.rs"]
 mod tum;
 
-#[path = "../tests/common/data.rs"]
+#[path = "../tests/integration/common/data.rs"]
 mod data;
 
 use std::time::Instant;
@@ -234,8 +234,13 @@ fn main() {
         &frames,
         rounds,
     );
-    if let Ok((paths, _)) = tum::load_sequence(&data::tum_fixture()) {
-        let tum_frames: Vec<_> = paths.iter().map(|p| tum::load_frame(p).unwrap()).collect();
+    if let Ok(sequence) = tum::TumSequence::load(&data::tum_fixture()) {
+        let tum_frames: Vec<_> = (0..sequence.pairs.len())
+            .map(|i| {
+                let frame = sequence.frame(i).unwrap();
+                (frame.gray, frame.depth_m)
+            })
+            .collect();
         let pairs: Vec<_> = (1..tum_frames.len()).map(|k| (k - 1, k, None)).collect();
         per_level(
             "tum_fr2_desk_10 (fixtures/)",

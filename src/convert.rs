@@ -22,6 +22,7 @@ use crate::error::{Error, Result};
 use crate::geometry::camera::{presets, PinholeIntrinsics};
 use crate::geometry::distortion::LensDistortion;
 use crate::image_buf::{ImageSize, Mask};
+use crate::mcap_io::encoding::{ColorEncoding, DepthEncoding};
 use crate::mcap_io::writer::MessageKind;
 use crate::mcap_io::{
     McapWriteOptions, RgbdMcapWriter, DEPTH_UNITS_KEY, FRAME_CAMERA_GROUNDTRUTH, FRAME_WORLD,
@@ -656,7 +657,7 @@ pub fn write_synthetic_rig_recording<W: Write + Seek>(
             t,
             &RosImage {
                 frame_id: COLOR_FRAME,
-                encoding: "rgb8",
+                encoding: ColorEncoding::Rgb8.as_str(),
                 size: rig.color.size,
                 step: rig.color.size.width * 3,
                 data: &rgb,
@@ -678,7 +679,7 @@ pub fn write_synthetic_rig_recording<W: Write + Seek>(
             t,
             &RosImage {
                 frame_id: depth_frame,
-                encoding: "16UC1",
+                encoding: DepthEncoding::U16.as_str(),
                 size: rig.depth.size,
                 step: rig.depth.size.width * 2,
                 data: &depth_mm,
@@ -690,7 +691,7 @@ pub fn write_synthetic_rig_recording<W: Write + Seek>(
             t,
             &RosImage {
                 frame_id: COLOR_FRAME,
-                encoding: "mono8",
+                encoding: ColorEncoding::Mono8.as_str(),
                 size: rig.color.size,
                 step: rig.color.size.width,
                 data: color.gt_mask.as_slice(),

@@ -19,6 +19,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::image_buf::{ImageSize, Mask, MASK_SET};
 use crate::mcap_io::annotate::{TOPIC_MASK, TOPIC_ODOMETRY};
+use crate::mcap_io::encoding::ColorEncoding;
 use crate::mcap_io::input::decode::{decode_image, read_poses, ImagePayload};
 use crate::mcap_io::input::{McapInput, Truncation};
 use crate::mcap_io::{TOPIC_GROUNDTRUTH_MASK, TOPIC_GROUNDTRUTH_POSE};
@@ -115,7 +116,7 @@ fn mask_from_message(input: &McapInput, channel_id: u16, data: &[u8]) -> Result<
             message: "expected an uncompressed mono8 mask, found a compressed image".into(),
         });
     };
-    if !matches!(encoding.as_str(), "mono8" | "8UC1") {
+    if encoding.parse::<ColorEncoding>() != Ok(ColorEncoding::Mono8) {
         return Err(Error::Decode {
             topic: channel.topic.clone(),
             message: format!("expected a mono8 mask, found encoding {encoding:?}"),

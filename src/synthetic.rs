@@ -53,7 +53,7 @@ pub const DEPTH_UNITS_PER_M: f32 = 5000.0;
 const ROWS_PER_TASK: usize = 8;
 
 /// Default [`SequenceConfig::colour_samples_per_axis`]. Measured on the 144-case DVO test
-/// (`tests/dvo_synthetic.rs`): regular (unjittered) n × n grids leave a y/pitch bias whose sign
+/// (`tests/integration/dvo_synthetic.rs`): regular (unjittered) n × n grids leave a y/pitch bias whose sign
 /// flips with n (n = 1…10: −1.4, +1.3, −0.1, −1.1, +0.5, −0.4, +0.3 (n = 8), −0.2 mm on 3° pitch),
 /// the texture's lattice beating against the sample grid on the grazing floor and ceiling;
 /// jittered 2 × 2 removes it (0.1–0.4 mm for n = 2, 3 and 4 alike) at 4× the shading cost.

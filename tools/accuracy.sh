@@ -2,7 +2,7 @@
 # Regenerates docs/accuracy.md: every accuracy table of occmask, from commands that exist in the
 # repository (occmask demo / convert / process / eval, examples/detector_accuracy.rs,
 # examples/scenario_accuracy.rs, examples/dvo_tum.rs, examples/synthetic_mcap.rs,
-# tests/dvo_synthetic.rs).
+# tests/integration/dvo_synthetic.rs).
 #
 # Usage: bash tools/accuracy.sh [SECTION...]     (default: every section, in the order below)
 #        OUT=/tmp/accuracy.md bash tools/accuracy.sh   (write elsewhere; default docs/accuracy.md)
@@ -96,7 +96,7 @@ section_failure_classes() {
   echo "Commands:"
   echo "\`cargo run --release --example scenario_accuracy -- --size 320x240 --scenarios failure,held_out --json F\`"
   echo "and \`… --size 640x480 --modes dvo_offline --scenarios failure,held_out --json G\`;"
-  echo "\`tests/detector_synthetic.rs\` holds bounds on the default mode at 320×240."
+  echo "\`tests/integration/detector_synthetic.rs\` holds bounds on the default mode at 320×240."
   echo
   "$EX/scenario_accuracy" --size 320x240 --scenarios failure,held_out --json "$WORK/fc_qvga.json" \
     > /dev/null 2>&1
@@ -194,12 +194,12 @@ EOF
 section_dvo_synthetic() {
   echo "## DVO on synthetic frame pairs"
   echo
-  echo "\`tests/dvo_synthetic.rs\` (\`every_seed_and_motion_converges_within_the_bounds\`): 8 seeds"
+  echo "\`tests/integration/dvo_synthetic.rs\` (\`every_seed_and_motion_converges_within_the_bounds\`): 8 seeds"
   echo "× 6 motions (up to 5 cm and 3°) × {static scene, a box covering 30 % of the view moving"
   echo "5 cm and masked, the same box not masked}, 640×480. Command:"
-  echo "\`cargo test --test dvo_synthetic every_seed -- --nocapture\`. Test bounds: 1 mm, 0.05°."
+  echo "\`cargo test --test integration dvo_synthetic::every_seed -- --nocapture\`. Test bounds: 1 mm, 0.05°."
   echo
-  cargo test -q --test dvo_synthetic every_seed_and_motion_converges_within_the_bounds -- --nocapture \
+  cargo test -q --test integration dvo_synthetic::every_seed_and_motion_converges_within_the_bounds -- --nocapture \
     > "$WORK/dvo_syn.txt" 2>&1
   sed -n 's/^\([0-9]*\) cases .*worst static \([0-9.]*\) mm \([0-9.]*\) deg, masked \([0-9.]*\) mm \([0-9.]*\) deg, unmasked (converged ones) \([0-9.]*\) mm \([0-9.]*\) deg.*/| cases | worst static | worst masked | worst unmasked (converged) |\n|---|---|---|---|\n| \1 | \2 mm, \3° | \4 mm, \5° | \6 mm, \7° |/p' "$WORK/dvo_syn.txt"
   echo
@@ -250,7 +250,7 @@ section_tum_fr2_desk_50() {
   echo "## TUM fr2_desk, 50 frames"
   echo
   echo "The same recording over 1.6 s (\$OCCMASK_DATA/tum_fr2_desk_50), same commands."
-  echo "\`tests/dvo_tum.rs\` and \`tests/detector_real.rs\` hold regression bounds on it."
+  echo "\`tests/integration/dvo_tum.rs\` and \`tests/integration/detector_real.rs\` hold regression bounds on it."
   echo
   if [ -d "$DATA/tum_fr2_desk_50" ]; then tum_tables "$DATA/tum_fr2_desk_50" tum_fr2_desk_50; else missing tum_fr2_desk_50; fi
 }
@@ -277,7 +277,7 @@ section_redkitchen_300() {
 }
 
 # Real walking people: the offline and causal closed loop and unmasked DVO against the motion
-# capture and the free-space reference masks (tests/detector_real.rs prints one line per run).
+# capture and the free-space reference masks (tests/integration/detector_real.rs prints one line per run).
 section_bonn_crowd_200() {
   echo "## Bonn RGB-D Dynamic \"crowd\", 200 frames: people walking past a hand-held camera"
   echo
@@ -289,12 +289,12 @@ section_bonn_crowd_200() {
   echo "moving when other frames up to 3 s before or after see through the point it shows (empty"
   echo "space where it has a surface), grown over its depth-connected body. F1 is the mean over the"
   echo "frames with a reference object. Command (the same runs that hold the test's bounds):"
-  echo "\`OCCMASK_DATA=DIR cargo test --release --test detector_real bonn -- --nocapture\`;"
+  echo "\`OCCMASK_DATA=DIR cargo test --release --test integration detector_real::bonn -- --nocapture\`;"
   echo "\`cargo run --release --example reference_masks -- DIR --bonn --score MASKDIR\` scores the"
   echo "masks of \`occmask process --export-masks MASKDIR\` against the same reference."
   echo
   if [ ! -d "$DATA/bonn_crowd_200" ]; then missing bonn_crowd_200; return; fi
-  OCCMASK_DATA="$DATA" cargo test --release --quiet --test detector_real bonn -- --nocapture \
+  OCCMASK_DATA="$DATA" cargo test --release --quiet --test integration detector_real::bonn -- --nocapture \
     > "$WORK/bonn.txt" 2>&1
   echo "| pose source | mode | ATE RMSE | rotation RPE over 30 frames | mask F1 | precision | recall |"
   echo "|---|---|---|---|---|---|---|"

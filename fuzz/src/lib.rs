@@ -4,7 +4,7 @@
 //! round-trip properties that must hold for every accepted input.
 //!
 //! The first byte of a message target's input selects the message flavour/type (so one corpus
-//! covers all variants); the rest is the message. `tests/fuzz_regressions.rs` in the main crate
+//! covers all variants); the rest is the message. `tests/integration/fuzz_regressions.rs` in the main crate
 //! includes this file with `#[path]` and replays the committed regressions and corpus through
 //! the very same functions, so the fuzz findings stay tested in a plain `cargo test`.
 
@@ -13,14 +13,12 @@ use std::path::Path;
 use occmask::dataset;
 use occmask::geometry::distortion::CameraModel;
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
-use occmask::mcap_io::codec::{self, Decoded};
 use occmask::mcap_io::input::decode::{
     decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
     CalibrationMsg, ImageMsg, ImagePayload,
 };
 use occmask::mcap_io::input::detect::{describe_channels, detect_topics, TopicOverrides};
 use occmask::mcap_io::input::{ChannelType, Flavor, McapInput, MessageType};
-use occmask::mcap_io::McapFileReader;
 use occmask::registration;
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{parse_tum_line, tum_line};
@@ -63,49 +61,18 @@ fn image_and_pixels(ct: ChannelType, data: &[u8]) {
     }
 }
 
-/// The convert/eval reader's protobuf decoders (`codec::decode` and its conversions).
-fn codec_decode(schema: &str, data: &[u8]) {
-    if let Ok(decoded) = codec::decode(schema, TOPIC, data) {
-        codec_conversions(&decoded);
-    }
-}
-
-/// The conversions convert/eval apply to a decoded protobuf message.
-fn codec_conversions(decoded: &Decoded) {
-    match decoded {
-        Decoded::RawImage(raw) => {
-            let _ = codec::depth_u16_from_raw(raw, TOPIC);
-            let _ = codec::mask_from_raw(raw, TOPIC);
-            let _ = codec::rgb8_from_raw(raw, TOPIC);
-        }
-        Decoded::CompressedImage(c) => {
-            let _ = codec::rgb8_from_compressed(c, TOPIC);
-        }
-        Decoded::CameraCalibration(c) => {
-            let _ = codec::intrinsics_from_calibration(c, TOPIC);
-        }
-        Decoded::PoseInFrame(p) => {
-            let _ = codec::stamped_pose_from(p, TOPIC);
-        }
-        Decoded::FrameTransform(t) => {
-            let _ = codec::isometry_from_parts(t.translation.as_ref(), t.rotation.as_ref(), TOPIC);
-        }
-    }
-}
-
 /// Foxglove protobuf `RawImage` / `CompressedImage` (selector bit 0), decoded by the process
 /// input decoder and the convert/eval codec, then converted to grey and depth.
 pub fn proto_image(data: &[u8]) {
     let Some((selector, msg)) = split(data) else {
         return;
     };
-    let (message, schema) = if selector & 1 == 0 {
-        (MessageType::RawImage, "foxglove.RawImage")
+    let message = if selector & 1 == 0 {
+        MessageType::RawImage
     } else {
-        (MessageType::CompressedImage, "foxglove.CompressedImage")
+        MessageType::CompressedImage
     };
     image_and_pixels(channel(Flavor::FoxgloveProtobuf, message), msg);
-    codec_decode(schema, msg);
 }
 
 /// Images at most this many pixels wide and tall are built from fuzzed calibrations (keeps
@@ -169,7 +136,6 @@ pub fn proto_calibration(data: &[u8]) {
     if let Ok(c) = decode_calibration(ct, TOPIC, data) {
         calibration_checks(&c);
     }
-    codec_decode("foxglove.CameraCalibration", data);
 }
 
 /// Foxglove JSON `RawImage` / `CompressedImage` / `CameraCalibration` (selector % 3).
@@ -337,14 +303,6 @@ pub fn poses(data: &[u8]) {
             );
         }
     }
-    if flavor == Flavor::FoxgloveProtobuf {
-        let schema = if message == MessageType::PoseInFrame {
-            "foxglove.PoseInFrame"
-        } else {
-            "foxglove.FrameTransform"
-        };
-        codec_decode(schema, msg);
-    }
 }
 
 /// The TUM/LARR text parsers (selector % 6): image lists, ground-truth trajectories, `--camera`,
@@ -401,15 +359,12 @@ pub fn text_parsers(data: &[u8]) {
     }
 }
 
-/// A whole MCAP file: written to `scratch`, opened by the process input (`McapInput`, indexed or
-/// linear), channels described and detected, the first message of every supported channel
-/// decoded and a bounded number of messages visited; then the reader of files occmask wrote
-/// (`McapFileReader`, used by convert/eval round trips) over the same bytes.
-pub fn mcap_file(data: &[u8], scratch: &Path) {
-    if std::fs::write(scratch, data).is_err() {
-        return;
-    }
-    if let Ok(input) = McapInput::open(scratch) {
+/// A whole MCAP file, opened from memory by the one MCAP reader (`McapInput`, indexed or
+/// linear; a file on disk takes the same path after opening): channels described and detected,
+/// the first message of every supported channel decoded and a bounded number of messages
+/// visited.
+pub fn mcap_file(data: &[u8]) {
+    if let Ok(input) = McapInput::from_bytes(data, Path::new("fuzz.mcap")) {
         let _ = describe_channels(&input);
         let _ = detect_topics(&input, &TopicOverrides::default());
         let _ = input.extras();
@@ -433,15 +388,5 @@ pub fn mcap_file(data: &[u8], scratch: &Path) {
             visited += 1;
             Ok(visited < MAX_MESSAGES_PER_FILE)
         });
-    }
-    if let Ok(reader) = McapFileReader::open(scratch) {
-        let _ = reader.channels();
-        let _ = reader.metadata();
-        let _ = reader.attachments();
-        if let Ok(messages) = reader.messages() {
-            for m in messages.take(MAX_MESSAGES_PER_FILE).flatten() {
-                codec_conversions(&m.message);
-            }
-        }
     }
 }

@@ -1,10 +1,10 @@
 //! `occmask demo`: the main job end to end on built-in data. The dominant-object synthetic
-//! scenario (exact ground-truth masks and poses) is written in `convert`'s layout to a
-//! temporary MCAP, annotated by the same code as `occmask process` (DVO closed loop), and
+//! scenario (exact ground-truth masks and poses) is written in `convert`'s layout to an MCAP
+//! recording in memory, annotated by the same code as `occmask process` (DVO closed loop), and
 //! scored by the same code as `occmask eval`. The result has exactly the channels `process`
 //! writes, so it opens in Foxglove with `foxglove/occmask-layout.json`.
 
-use std::io::BufWriter;
+use std::io::{BufWriter, Cursor};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
@@ -19,6 +19,9 @@ use occmask::process::{pipeline_factory, process_file, PipelineOptions, ProcessC
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
 use super::{Globals, Outcome};
+
+/// The name the in-memory input recording goes by in messages.
+const DEMO_INPUT_NAME: &str = "<demo recording>";
 
 /// `occmask demo` options.
 #[derive(Debug, Args)]
@@ -38,15 +41,6 @@ pub struct DemoArgs {
     pub seed: u64,
 }
 
-/// Removes the temporary input recording however the demo ends.
-struct TempFile(PathBuf);
-
-impl Drop for TempFile {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
-}
-
 /// Stops processing on Ctrl-C / SIGTERM.
 struct StopOnSignal;
 
@@ -58,13 +52,6 @@ impl ProcessHooks for StopOnSignal {
             ControlFlow::Continue(())
         }
     }
-}
-
-fn temporary_input_path(output: &Path) -> PathBuf {
-    let name = output
-        .file_name()
-        .map_or_else(|| "demo.mcap".into(), |n| n.to_string_lossy().into_owned());
-    output.with_file_name(format!(".{name}.input.{}.tmp", std::process::id()))
 }
 
 /// Runs the demo.
@@ -86,13 +73,10 @@ pub fn run(args: DemoArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let (output, file) = AtomicOutput::create(&args.output, args.force, &[])
         .with_context(|| format!("cannot write {}", args.output.display()))?;
 
-    // 1. The synthetic recording, as `occmask convert` would write a dataset.
-    let input_path = TempFile(temporary_input_path(&args.output));
-    let input_file = std::fs::File::create(&input_path.0)
-        .with_context(|| format!("cannot create {}", input_path.0.display()))?;
-    let sink = write_synthetic_sequence(
+    // 1. The synthetic recording, as `occmask convert` would write a dataset, in memory.
+    let recording = write_synthetic_sequence(
         &sequence,
-        BufWriter::new(input_file),
+        Cursor::new(Vec::new()),
         &McapWriteOptions::default(),
         &mut |_| {
             if super::signals::interrupted() {
@@ -102,11 +86,9 @@ pub fn run(args: DemoArgs, globals: &Globals) -> anyhow::Result<Outcome> {
             }
         },
     )?;
-    sink.into_inner()
-        .map_err(|e| anyhow!("cannot write {}: {}", input_path.0.display(), e.error()))?;
 
     // 2. `occmask process` on it: DVO closed loop + occlusion accumulation.
-    let input = McapInput::open(&input_path.0)?;
+    let input = McapInput::from_bytes(recording.into_inner(), Path::new(DEMO_INPUT_NAME))?;
     let mut factory = pipeline_factory(PipelineOptions::default());
     let (sink, report) = process_file(
         &input,
@@ -120,7 +102,6 @@ pub fn run(args: DemoArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         .map_err(|e| anyhow!("cannot write {}: {}", output.temp_path().display(), e.error()))?;
     output.commit(file)?;
     drop(input);
-    drop(input_path);
 
     // 3. `occmask eval` of the result against the exact ground truth.
     let scores = evaluate(&args.output).with_context(|| format!("evaluating {}", args.output.display()))?;

@@ -60,7 +60,7 @@ pub const MAX_DVO_LEVELS: usize = 8;
 /// ≈ μ_min / (λ·d): on a distant, nearly fronto-parallel scene the x-translation / yaw valley
 /// has μ_min / d ≈ 1e-4, so with λ₀ = 0.1 (divided by only 1.5 per accepted step) the solver
 /// stops several millimetres short along it. Measured on the synthetic pairs of
-/// `tests/dvo_synthetic.rs` (worst of six motions, finest level 1): λ₀ 0.1 → 7.2 mm, 0.01 →
+/// `tests/integration/dvo_synthetic.rs` (worst of six motions, finest level 1): λ₀ 0.1 → 7.2 mm, 0.01 →
 /// 2.1 mm, 1e-3 → 1.45 mm, 1e-4 → 1.67 mm; on TUM fr2_desk identical RPE and 45 % fewer
 /// finest-level iterations. Rejected steps still raise λ by ×3 as in the release.
 pub const LM_LAMBDA_INITIAL: f64 = 1e-3;
@@ -74,7 +74,7 @@ pub const STEP_TOLERANCE: f64 = 1e-4;
 /// only converges when the motion moves the coarsest level's image by about its texture's
 /// correlation length (1–2 px); a 3° rotation moves a 640×480 image by 27 px, i.e. 3.4 px at
 /// 80×60 (level 3) but 1.7 px at 40×30 (level 4). Measured on the synthetic pairs of
-/// `tests/dvo_synthetic.rs` with the 30 % box masked (12 seeds × 6 motions): with 4 levels the
+/// `tests/integration/dvo_synthetic.rs` with the 30 % box masked (12 seeds × 6 motions): with 4 levels the
 /// 3° pitch case ended in a wrong minimum for 4 of 12 seeds (43–310 mm off, cost near the
 /// saturated loss), with 5 levels none did. Images too small for 5 levels use as many as fit
 /// (see [`DvoConfig::levels_for`]).

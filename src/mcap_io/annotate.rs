@@ -44,6 +44,7 @@ use crate::error::{Error, Result};
 use crate::image_buf::{Image, Mask, MASK_SET};
 
 use super::codec;
+use super::encoding::DepthEncoding;
 use super::input::{ExtraRecord, McapInput};
 use super::writer::{Compression, McapWriteOptions};
 use super::{ENCODING_PROTOBUF, FRAME_WORLD, LIBRARY, SCHEMA_FRAME_TRANSFORM, TOPIC_TF};
@@ -401,7 +402,8 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
                 frame_id: frame.frame_id.to_owned(),
                 width: acc.width() as u32,
                 height: acc.height() as u32,
-                encoding: "32FC1".into(),
+                // One f32 per pixel, the same layout as float depth.
+                encoding: DepthEncoding::F32.as_str().into(),
                 step: (acc.width() * 4) as u32,
                 data: Bytes::from(data),
             };

@@ -6,24 +6,26 @@
 //! `occmask convert`, `occmask process` and the viewer; the README's channel table lists them.
 //!
 //! - [`codec`]: sans-IO conversion between library types and Foxglove messages;
+//! - [`encoding`]: the image encodings ([`encoding::ColorEncoding`], [`encoding::DepthEncoding`],
+//!   compressed formats) parsed from and written as their ROS / Foxglove strings;
 //! - [`writer`]: [`RgbdMcapWriter`], which registers schemas and channels once and writes
 //!   messages in the order it is given (callers merge their streams by time);
-//! - [`reader`]: [`McapFileReader`] for files this crate wrote;
+//! - [`input`]: [`input::McapInput`], the one reader, for any RGB-D MCAP file (occmask's own
+//!   included);
 //! - [`output`]: [`AtomicOutput`], the temporary-file-then-rename helper every command uses;
 //! - [`ros_out`]: [`ros_out::RosMcapWriter`], recordings in ROS 1 / ROS 2 conventions (synthetic
 //!   recordings and fixtures).
 
 pub mod annotate;
 pub mod codec;
+pub mod encoding;
 pub mod input;
 pub mod output;
-pub mod reader;
 pub mod ros_out;
 pub mod writer;
 
-pub use codec::{ColorFormat, Decoded};
+pub use codec::ColorFormat;
 pub use output::AtomicOutput;
-pub use reader::{McapFileReader, ReadMessage};
 pub use writer::{Compression, McapWriteOptions, RgbdMcapWriter};
 
 /// Colour images as the original PNG/JPEG bytes (`foxglove.CompressedImage`) or decoded `rgb8`
@@ -66,13 +68,6 @@ pub const ENCODING_PROTOBUF: &str = "protobuf";
 /// Channel-metadata key on depth channels: raw depth units per metre, as decimal text
 /// (`"5000"` for TUM, `"1000"` for LARR/ICSL millimetres).
 pub const DEPTH_UNITS_KEY: &str = "depth_units_per_meter";
-
-/// `RawImage.encoding` of depth images: 16-bit unsigned little-endian, one channel.
-pub const ENCODING_16UC1: &str = "16UC1";
-/// `RawImage.encoding` of masks: 8-bit, one channel.
-pub const ENCODING_MONO8: &str = "mono8";
-/// `RawImage.encoding` of decoded colour images.
-pub const ENCODING_RGB8: &str = "rgb8";
 
 /// Name of the metadata record `occmask convert` writes (dataset, intrinsics, options).
 pub const METADATA_CONVERT: &str = "occmask.convert";

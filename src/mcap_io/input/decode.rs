@@ -9,6 +9,10 @@ use crate::geometry::camera::PinholeIntrinsics;
 use crate::geometry::distortion::{CameraModel, LensDistortion};
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
 use crate::mcap_io::codec::decode_compressed_pixels;
+use crate::mcap_io::encoding::{
+    ColorEncoding, ColorFormat, CompressedDepthFormat, DepthCodec, DepthEncoding,
+};
+pub use crate::mcap_io::encoding::{SUPPORTED_COLOR_ENCODINGS, SUPPORTED_DEPTH_ENCODINGS};
 use crate::time::{checked_join_ns, join_ns};
 
 use super::{json, pixels, ros1, ros2};
@@ -167,10 +171,8 @@ impl ImageMsg {
     /// True when the encoding is a depth encoding (`16UC1`, `mono16`, `32FC1`, compressedDepth).
     pub fn is_depth(&self) -> bool {
         match &self.payload {
-            ImagePayload::Raw { encoding, .. } => {
-                matches!(encoding.as_str(), "16UC1" | "mono16" | "32FC1")
-            }
-            ImagePayload::Compressed { format, .. } => format.contains("compressedDepth"),
+            ImagePayload::Raw { encoding, .. } => encoding.parse::<DepthEncoding>().is_ok(),
+            ImagePayload::Compressed { format, .. } => CompressedDepthFormat::is_compressed_depth(format),
         }
     }
 }
@@ -324,6 +326,92 @@ fn ros_ns(t: ros2::Time, topic: &str) -> Result<u64> {
     Ok(join_ns(sec, t.nanosec))
 }
 
+/// The one part in which ROS 1 and ROS 2 messages differ: the header (ROS 1 has a sequence
+/// number and an unsigned `time`). Every ROS message struct is generic over it.
+trait RosHeader {
+    /// The stamp in nanoseconds, checked.
+    fn stamp_ns(&self, topic: &str) -> Result<u64>;
+    /// The coordinate frame.
+    fn into_frame_id(self) -> String;
+}
+
+impl RosHeader for ros2::Header {
+    fn stamp_ns(&self, topic: &str) -> Result<u64> {
+        ros_ns(self.stamp, topic)
+    }
+    fn into_frame_id(self) -> String {
+        self.frame_id
+    }
+}
+
+impl RosHeader for ros1::Header {
+    fn stamp_ns(&self, topic: &str) -> Result<u64> {
+        ros1_ns(self.stamp, topic)
+    }
+    fn into_frame_id(self) -> String {
+        self.frame_id
+    }
+}
+
+fn ros_image<H: RosHeader>(m: ros2::Image<H>, topic: &str) -> Result<ImageMsg> {
+    Ok(ImageMsg {
+        timestamp_ns: m.header.stamp_ns(topic)?,
+        frame_id: m.header.into_frame_id(),
+        payload: ImagePayload::Raw {
+            width: m.width,
+            height: m.height,
+            encoding: m.encoding,
+            step: m.step,
+            big_endian: m.is_bigendian != 0,
+            data: m.data,
+        },
+    })
+}
+
+fn ros_compressed_image<H: RosHeader>(m: ros2::CompressedImage<H>, topic: &str) -> Result<ImageMsg> {
+    Ok(ImageMsg {
+        timestamp_ns: m.header.stamp_ns(topic)?,
+        frame_id: m.header.into_frame_id(),
+        payload: ImagePayload::Compressed {
+            format: m.format,
+            data: m.data,
+        },
+    })
+}
+
+fn ros_calibration<H: RosHeader>(m: ros2::CameraInfo<H>, topic: &str) -> Result<CalibrationMsg> {
+    Ok(CalibrationMsg {
+        timestamp_ns: m.header.stamp_ns(topic)?,
+        frame_id: m.header.into_frame_id(),
+        size: ImageSize::new(m.width as usize, m.height as usize),
+        k: m.k.to_vec(),
+        distortion_model: m.distortion_model,
+        d: m.d,
+    })
+}
+
+fn ros_pose_stamped<H: RosHeader>(m: ros2::PoseStamped<H>, topic: &str) -> Result<PoseSample> {
+    let (t, q) = (m.pose.position, m.pose.orientation);
+    let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+    Ok(PoseSample {
+        timestamp_ns: m.header.stamp_ns(topic)?,
+        parent_frame: m.header.into_frame_id(),
+        child_frame: None,
+        parent_from_child: iso,
+    })
+}
+
+fn ros_transform<H: RosHeader>(m: ros2::TransformStamped<H>, topic: &str) -> Result<PoseSample> {
+    let (t, q) = (m.transform.translation, m.transform.rotation);
+    let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
+    Ok(PoseSample {
+        timestamp_ns: m.header.stamp_ns(topic)?,
+        parent_frame: m.header.into_frame_id(),
+        child_frame: Some(m.child_frame_id),
+        parent_from_child: iso,
+    })
+}
+
 /// Decodes an image message.
 ///
 /// # Errors
@@ -384,57 +472,19 @@ pub fn decode_image(ct: ChannelType, topic: &str, data: &[u8]) -> Result<ImageMs
             })
         }
         (Flavor::Ros2Cdr, MessageType::RawImage) => {
-            let m: ros2::Image = from_cdr(data, topic, ros2::names::IMAGE)?;
-            Ok(ImageMsg {
-                timestamp_ns: ros_ns(m.header.stamp, topic)?,
-                frame_id: m.header.frame_id,
-                payload: ImagePayload::Raw {
-                    width: m.width,
-                    height: m.height,
-                    encoding: m.encoding,
-                    step: m.step,
-                    big_endian: m.is_bigendian != 0,
-                    data: m.data,
-                },
-            })
+            ros_image(from_cdr::<ros2::Image>(data, topic, ros2::names::IMAGE)?, topic)
         }
-        (Flavor::Ros2Cdr, MessageType::CompressedImage) => {
-            let m: ros2::CompressedImage = from_cdr(data, topic, ros2::names::COMPRESSED_IMAGE)?;
-            Ok(ImageMsg {
-                timestamp_ns: ros_ns(m.header.stamp, topic)?,
-                frame_id: m.header.frame_id,
-                payload: ImagePayload::Compressed {
-                    format: m.format,
-                    data: m.data,
-                },
-            })
-        }
+        (Flavor::Ros2Cdr, MessageType::CompressedImage) => ros_compressed_image(
+            from_cdr::<ros2::CompressedImage>(data, topic, ros2::names::COMPRESSED_IMAGE)?,
+            topic,
+        ),
         (Flavor::Ros1, MessageType::RawImage) => {
-            let m: ros1::Image = from_ros1(data, topic, ros1::names::IMAGE)?;
-            Ok(ImageMsg {
-                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
-                frame_id: m.header.frame_id,
-                payload: ImagePayload::Raw {
-                    width: m.width,
-                    height: m.height,
-                    encoding: m.encoding,
-                    step: m.step,
-                    big_endian: m.is_bigendian != 0,
-                    data: m.data,
-                },
-            })
+            ros_image(from_ros1::<ros1::Image>(data, topic, ros1::names::IMAGE)?, topic)
         }
-        (Flavor::Ros1, MessageType::CompressedImage) => {
-            let m: ros1::CompressedImage = from_ros1(data, topic, ros1::names::COMPRESSED_IMAGE)?;
-            Ok(ImageMsg {
-                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
-                frame_id: m.header.frame_id,
-                payload: ImagePayload::Compressed {
-                    format: m.format,
-                    data: m.data,
-                },
-            })
-        }
+        (Flavor::Ros1, MessageType::CompressedImage) => ros_compressed_image(
+            from_ros1::<ros1::CompressedImage>(data, topic, ros1::names::COMPRESSED_IMAGE)?,
+            topic,
+        ),
         _ => Err(decode_error(
             topic,
             format!("expected an image channel, found {:?}", ct.message),
@@ -470,28 +520,14 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
                 d: m.d,
             })
         }
-        (Flavor::Ros2Cdr, MessageType::Calibration) => {
-            let m: ros2::CameraInfo = from_cdr(data, topic, ros2::names::CAMERA_INFO)?;
-            Ok(CalibrationMsg {
-                timestamp_ns: ros_ns(m.header.stamp, topic)?,
-                frame_id: m.header.frame_id,
-                size: ImageSize::new(m.width as usize, m.height as usize),
-                k: m.k.to_vec(),
-                distortion_model: m.distortion_model,
-                d: m.d,
-            })
-        }
-        (Flavor::Ros1, MessageType::Calibration) => {
-            let m: ros1::CameraInfo = from_ros1(data, topic, ros1::names::CAMERA_INFO)?;
-            Ok(CalibrationMsg {
-                timestamp_ns: ros1_ns(m.header.stamp, topic)?,
-                frame_id: m.header.frame_id,
-                size: ImageSize::new(m.width as usize, m.height as usize),
-                k: m.k.to_vec(),
-                distortion_model: m.distortion_model,
-                d: m.d,
-            })
-        }
+        (Flavor::Ros2Cdr, MessageType::Calibration) => ros_calibration(
+            from_cdr::<ros2::CameraInfo>(data, topic, ros2::names::CAMERA_INFO)?,
+            topic,
+        ),
+        (Flavor::Ros1, MessageType::Calibration) => ros_calibration(
+            from_ros1::<ros1::CameraInfo>(data, topic, ros1::names::CAMERA_INFO)?,
+            topic,
+        ),
         _ => Err(decode_error(
             topic,
             format!("expected a calibration channel, found {:?}", ct.message),
@@ -562,46 +598,21 @@ pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<Pos
             iso,
         ))
     };
-    let ros_tf = |m: ros2::TransformStamped| -> Result<PoseSample> {
-        let (t, q) = (m.transform.translation, m.transform.rotation);
-        let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
-        Ok(sample(
-            ros_ns(m.header.stamp, topic)?,
-            m.header.frame_id,
-            Some(m.child_frame_id),
-            iso,
-        ))
-    };
-    let ros1_tf = |m: ros1::TransformStamped| -> Result<PoseSample> {
-        let (t, q) = (m.transform.translation, m.transform.rotation);
-        let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
-        Ok(sample(
-            ros1_ns(m.header.stamp, topic)?,
-            m.header.frame_id,
-            Some(m.child_frame_id),
-            iso,
-        ))
-    };
     match (ct.flavor, ct.message) {
-        (Flavor::Ros1, MessageType::PoseInFrame) => {
-            let m: ros1::PoseStamped = from_ros1(data, topic, ros1::names::POSE_STAMPED)?;
-            let (t, q) = (m.pose.position, m.pose.orientation);
-            let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
-            Ok(vec![sample(
-                ros1_ns(m.header.stamp, topic)?,
-                m.header.frame_id,
-                None,
-                iso,
-            )])
-        }
-        (Flavor::Ros1, MessageType::FrameTransform) => Ok(vec![ros1_tf(from_ros1(
-            data,
+        (Flavor::Ros1, MessageType::PoseInFrame) => Ok(vec![ros_pose_stamped(
+            from_ros1::<ros1::PoseStamped>(data, topic, ros1::names::POSE_STAMPED)?,
             topic,
-            ros1::names::TRANSFORM_STAMPED,
-        )?)?]),
+        )?]),
+        (Flavor::Ros1, MessageType::FrameTransform) => Ok(vec![ros_transform(
+            from_ros1::<ros1::TransformStamped>(data, topic, ros1::names::TRANSFORM_STAMPED)?,
+            topic,
+        )?]),
         (Flavor::Ros1, MessageType::FrameTransforms) => {
             let m: ros1::TfMessage = from_ros1(data, topic, ros1::names::TF_MESSAGE)?;
-            m.transforms.into_iter().map(ros1_tf).collect()
+            m.transforms
+                .into_iter()
+                .map(|t| ros_transform(t, topic))
+                .collect()
         }
         (Flavor::FoxgloveProtobuf, MessageType::PoseInFrame) => {
             let m: fm::PoseInFrame = proto(data, topic, "foxglove.PoseInFrame")?;
@@ -634,25 +645,20 @@ pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<Pos
             let m: json::FrameTransforms = from_json(data, topic, "foxglove.FrameTransforms")?;
             m.transforms.into_iter().map(json_tf).collect()
         }
-        (Flavor::Ros2Cdr, MessageType::PoseInFrame) => {
-            let m: ros2::PoseStamped = from_cdr(data, topic, ros2::names::POSE_STAMPED)?;
-            let (t, q) = (m.pose.position, m.pose.orientation);
-            let iso = isometry(topic, [t.x, t.y, t.z], [q.x, q.y, q.z, q.w])?;
-            Ok(vec![sample(
-                ros_ns(m.header.stamp, topic)?,
-                m.header.frame_id,
-                None,
-                iso,
-            )])
-        }
-        (Flavor::Ros2Cdr, MessageType::FrameTransform) => Ok(vec![ros_tf(from_cdr(
-            data,
+        (Flavor::Ros2Cdr, MessageType::PoseInFrame) => Ok(vec![ros_pose_stamped(
+            from_cdr::<ros2::PoseStamped>(data, topic, ros2::names::POSE_STAMPED)?,
             topic,
-            ros2::names::TRANSFORM_STAMPED,
-        )?)?]),
+        )?]),
+        (Flavor::Ros2Cdr, MessageType::FrameTransform) => Ok(vec![ros_transform(
+            from_cdr::<ros2::TransformStamped>(data, topic, ros2::names::TRANSFORM_STAMPED)?,
+            topic,
+        )?]),
         (Flavor::Ros2Cdr, MessageType::FrameTransforms) => {
             let m: ros2::TfMessage = from_cdr(data, topic, ros2::names::TF_MESSAGE)?;
-            m.transforms.into_iter().map(ros_tf).collect()
+            m.transforms
+                .into_iter()
+                .map(|t| ros_transform(t, topic))
+                .collect()
         }
         _ => Err(decode_error(
             topic,
@@ -660,13 +666,6 @@ pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<Pos
         )),
     }
 }
-
-/// Colour encodings accepted by [`gray_from_image_into`].
-pub const SUPPORTED_COLOR_ENCODINGS: &str = "rgb8, bgr8, rgba8, bgra8, mono8/8UC1, yuv422/uyvy, \
-    yuv422_yuy2/yuyv, bayer_rggb8/bggr8/gbrg8/grbg8, PNG, JPEG";
-/// Depth encodings accepted by [`depth_from_image_into`].
-pub const SUPPORTED_DEPTH_ENCODINGS: &str = "16UC1/mono16 (raw units), 32FC1 (metres), \
-    compressedDepth png or rvl (16UC1 raw units, 32FC1 inverse-depth quantised)";
 
 /// Header bytes `compressed_depth_image_transport` puts before the PNG of a 16-bit depth
 /// image (format enum + two float quantisation parameters).
@@ -755,53 +754,46 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
             data,
             ..
         } => {
-            if let Some(uyvy) = match encoding.as_str() {
-                "yuv422" | "uyvy" | "UYVY" => Some(true),
-                "yuv422_yuy2" | "yuyv" | "YUYV" => Some(false),
-                _ => None,
-            } {
-                // Packed 4:2:2: two bytes per pixel, the luma is the grey.
-                let size = raw_rows(topic, *width, *height, *step, 2, data.len())?;
-                resize_for(gray, size);
-                let step = *step as usize;
-                for y in 0..size.height {
-                    let row = &data[y * step..y * step + size.width * 2];
-                    for (x, out) in gray.row_mut(y).iter_mut().enumerate() {
-                        *out = pixels::gray_from_video_luma(row[pixels::yuv422_luma_offset(x, uyvy)]);
-                    }
-                }
-                return Ok(());
-            }
-            if let Some(pattern) = pixels::BayerPattern::from_encoding(encoding) {
-                let size = raw_rows(topic, *width, *height, *step, 1, data.len())?;
-                resize_for(gray, size);
-                let step = *step as usize;
-                let rows: Vec<&[u8]> = (0..size.height)
-                    .map(|y| &data[y * step..y * step + size.width])
-                    .collect();
-                for y in 0..size.height {
-                    for (x, out) in gray.row_mut(y).iter_mut().enumerate() {
-                        let [pr, pg, pb] = pixels::demosaic_pixel(&rows, pattern, x, y);
-                        *out = wr * f32::from(pr) + wg * f32::from(pg) + wb * f32::from(pb);
-                    }
-                }
-                return Ok(());
-            }
-            // (bytes per pixel, offsets of r, g, b); grey images use one channel three times.
-            let (bpp, [r, g, b]) = match encoding.as_str() {
-                "rgb8" => (3, [0, 1, 2]),
-                "bgr8" | "8UC3" => (3, [2, 1, 0]),
-                "rgba8" => (4, [0, 1, 2]),
-                "bgra8" | "8UC4" => (4, [2, 1, 0]),
-                "mono8" | "8UC1" => (1, [0, 0, 0]),
-                other => return Err(unsupported(topic, "colour", other, SUPPORTED_COLOR_ENCODINGS)),
-            };
+            let color: ColorEncoding = encoding
+                .parse()
+                .map_err(|_| unsupported(topic, "colour", encoding, SUPPORTED_COLOR_ENCODINGS))?;
+            let bpp = color.bytes_per_pixel();
             let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
             resize_for(gray, size);
             let step = *step as usize;
+            let row = |y: usize| &data[y * step..y * step + size.width * bpp];
+            // Offsets of r, g, b in an interleaved pixel.
+            let rgb_offsets = match color {
+                ColorEncoding::Uyvy | ColorEncoding::Yuyv => {
+                    // Packed 4:2:2: two bytes per pixel, the luma is the grey.
+                    let uyvy = color == ColorEncoding::Uyvy;
+                    for y in 0..size.height {
+                        let row = row(y);
+                        for (x, out) in gray.row_mut(y).iter_mut().enumerate() {
+                            *out = pixels::gray_from_video_luma(row[pixels::yuv422_luma_offset(x, uyvy)]);
+                        }
+                    }
+                    return Ok(());
+                }
+                ColorEncoding::Bayer8(filter) => {
+                    let pattern = pixels::BayerPattern::from(filter);
+                    let rows: Vec<&[u8]> = (0..size.height).map(row).collect();
+                    for y in 0..size.height {
+                        for (x, out) in gray.row_mut(y).iter_mut().enumerate() {
+                            let [pr, pg, pb] = pixels::demosaic_pixel(&rows, pattern, x, y);
+                            *out = wr * f32::from(pr) + wg * f32::from(pg) + wb * f32::from(pb);
+                        }
+                    }
+                    return Ok(());
+                }
+                ColorEncoding::Rgb8 | ColorEncoding::Rgba8 => [0, 1, 2],
+                ColorEncoding::Bgr8 | ColorEncoding::Bgra8 => [2, 1, 0],
+                // Grey images use one channel three times.
+                ColorEncoding::Mono8 => [0, 0, 0],
+            };
+            let [r, g, b] = rgb_offsets;
             for y in 0..size.height {
-                let row = &data[y * step..y * step + size.width * bpp];
-                for (out, px) in gray.row_mut(y).iter_mut().zip(row.chunks_exact(bpp)) {
+                for (out, px) in gray.row_mut(y).iter_mut().zip(row(y).chunks_exact(bpp)) {
                     *out = if bpp == 1 {
                         f32::from(px[0]) / 255.0
                     } else {
@@ -812,15 +804,15 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
             Ok(())
         }
         ImagePayload::Compressed { format, data } => {
-            let lower = format.to_ascii_lowercase();
-            let image_format = if lower.contains("png") {
-                image::ImageFormat::Png
-            } else if lower.contains("jpeg") || lower.contains("jpg") {
-                image::ImageFormat::Jpeg
-            } else {
+            let Some(color_format) = ColorFormat::from_transport_format(format) else {
                 return Err(unsupported(topic, "colour", format, SUPPORTED_COLOR_ENCODINGS));
             };
-            let decoded = decode_compressed_pixels(data, image_format, topic, &format!("{format} image"))?;
+            let decoded = decode_compressed_pixels(
+                data,
+                color_format.image_format(),
+                topic,
+                &format!("{format} image"),
+            )?;
             let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
             resize_for(gray, size);
             if decoded.color().channel_count() <= 2 {
@@ -864,18 +856,17 @@ pub fn depth_from_image_into(
             big_endian,
             data,
         } => {
-            let bpp = match encoding.as_str() {
-                "16UC1" | "mono16" => 2,
-                "32FC1" => 4,
-                other => return Err(unsupported(topic, "depth", other, SUPPORTED_DEPTH_ENCODINGS)),
-            };
+            let depth_encoding: DepthEncoding = encoding
+                .parse()
+                .map_err(|_| unsupported(topic, "depth", encoding, SUPPORTED_DEPTH_ENCODINGS))?;
+            let bpp = depth_encoding.bytes_per_pixel();
             let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
             resize_for(depth_m, size);
             let step = *step as usize;
             for y in 0..size.height {
                 let row = &data[y * step..y * step + size.width * bpp];
                 let out = depth_m.row_mut(y);
-                if bpp == 2 {
+                if depth_encoding == DepthEncoding::U16 {
                     for (o, b) in out.iter_mut().zip(row.chunks_exact(2)) {
                         let raw = if *big_endian {
                             u16::from_be_bytes([b[0], b[1]])
@@ -899,10 +890,10 @@ pub fn depth_from_image_into(
             Ok(())
         }
         ImagePayload::Compressed { format, data } => {
-            let raw = format.starts_with("16UC1");
-            if !format.contains("compressedDepth") || !(raw || format.starts_with("32FC1")) {
-                return Err(unsupported(topic, "depth", format, SUPPORTED_DEPTH_ENCODINGS));
-            }
+            let compressed: CompressedDepthFormat = format
+                .parse()
+                .map_err(|_| unsupported(topic, "depth", format, SUPPORTED_DEPTH_ENCODINGS))?;
+            let raw = compressed.depth == DepthEncoding::U16;
             let Some((header, payload)) = data.split_at_checked(COMPRESSED_DEPTH_HEADER_BYTES) else {
                 return Err(decode_error(
                     topic,
@@ -913,7 +904,7 @@ pub fn depth_from_image_into(
                     ),
                 ));
             };
-            let (size, values) = if format.contains("compressedDepth rvl") {
+            let (size, values) = if compressed.codec == DepthCodec::Rvl {
                 rvl_values(payload, topic, format)?
             } else {
                 let what = format!("{format} depth PNG");

@@ -24,9 +24,9 @@ pub mod transforms;
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::io::{BufReader, Cursor, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use mcap::records::{MessageHeader, Record};
 use mcap::sans_io::indexed_reader::ReadOrder;
@@ -126,15 +126,15 @@ pub struct Truncation {
 /// killed while writing it): the compressed prefix is decompressed as far as it goes (zstd and
 /// lz4 decode block by block) and parsed up to the first incomplete record. Returns
 /// (opcode, body) pairs; empty when the record at `offset` is not a chunk.
-fn partial_chunk_records(path: &Path, offset: u64) -> Result<Vec<(u8, Vec<u8>)>> {
+fn partial_chunk_records(source: &Source, offset: u64) -> Result<Vec<(u8, Vec<u8>)>> {
     // Chunk header after opcode and length: start, end, uncompressed size (u64 each), CRC (u32),
     // compression string (u32 length + bytes), compressed size (u64).
     const FIXED_BYTES: usize = 9 + 8 + 8 + 8 + 4;
-    let mut file = open_file(path)?;
+    let mut file = source.open()?;
     let mut buf = Vec::new();
     file.seek(SeekFrom::Start(offset))
         .and_then(|_| file.read_to_end(&mut buf))
-        .map_err(|e| Error::io("cannot read MCAP file", path, e))?;
+        .map_err(|e| Error::io("cannot read MCAP file", &source.path, e))?;
     if buf.len() < FIXED_BYTES + 4 || buf[0] != mcap::records::op::CHUNK {
         return Ok(Vec::new());
     }
@@ -203,13 +203,13 @@ fn partial_chunk_records(path: &Path, offset: u64) -> Result<Vec<(u8, Vec<u8>)>>
 /// Walks the top-level record framing (opcode, length, body) without reading bodies, and
 /// returns where the last complete record ends, whether the data section was complete, and
 /// the log-time range of an incomplete trailing chunk.
-fn find_truncation(path: &Path, file_len: u64) -> Result<Truncation> {
+fn find_truncation(source: &Source, file_len: u64) -> Result<Truncation> {
     const MAGIC_BYTES: u64 = 8;
     const PREFIX_BYTES: u64 = 9;
     // Chunk body: message_start_time, message_end_time (u64 each) come first.
     const CHUNK_TIMES_BYTES: usize = 16;
-    let mut file = BufReader::with_capacity(64 * 1024, open_file(path)?);
-    let io = |e| Error::io("cannot read MCAP file", path, e);
+    let mut file = BufReader::with_capacity(64 * 1024, source.open()?);
+    let io = |e| Error::io("cannot read MCAP file", &source.path, e);
     file.seek(SeekFrom::Start(MAGIC_BYTES)).map_err(io)?;
     let mut pos = MAGIC_BYTES;
     let mut messages_intact = false;
@@ -232,7 +232,7 @@ fn find_truncation(path: &Path, file_len: u64) -> Result<Truncation> {
                 if file.read_exact(&mut times).is_ok() {
                     let mut start = u64::from_le_bytes(times[..8].try_into().unwrap_or([0; 8]));
                     let end = u64::from_le_bytes(times[8..].try_into().unwrap_or([0; 8]));
-                    for (op, body) in partial_chunk_records(path, pos)? {
+                    for (op, body) in partial_chunk_records(source, pos)? {
                         if let Ok(Record::Message { header, .. }) = mcap::parse_record(op, &body) {
                             salvaged_messages += 1;
                             start = start.max(header.log_time);
@@ -280,9 +280,92 @@ fn record_length_limit(file_len: u64) -> usize {
     usize::try_from(file_len.max(MIN_RECORD_LENGTH_LIMIT_BYTES)).unwrap_or(usize::MAX)
 }
 
-/// An open input MCAP file.
-pub struct McapInput {
+/// Where an [`McapInput`] reads its bytes, and the name its messages give it.
+struct Source {
+    /// The file's path, or the name given to a reader.
     path: PathBuf,
+    /// `None`: the file at `path`, opened again for each pass (passes may overlap).
+    reader: Option<SharedReader>,
+}
+
+/// Any seekable byte source an [`McapInput`] can read ([`std::fs::File`],
+/// [`std::io::Cursor`] over bytes, ...).
+pub trait ReadSeek: Read + Seek + Send {}
+
+impl<T: Read + Seek + Send> ReadSeek for T {}
+
+/// A reader shared by the passes over it; each pass keeps its own position.
+type SharedReader = Arc<Mutex<Box<dyn ReadSeek>>>;
+
+/// One pass over a [`Source`].
+enum SourceReader {
+    File(File),
+    Shared { reader: SharedReader, position: u64 },
+}
+
+fn poisoned() -> std::io::Error {
+    std::io::Error::other("another reader of the same MCAP input panicked")
+}
+
+impl Read for SourceReader {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            SourceReader::File(f) => f.read(buf),
+            SourceReader::Shared { reader, position } => {
+                let mut r = reader.lock().map_err(|_| poisoned())?;
+                r.seek(SeekFrom::Start(*position))?;
+                let n = r.read(buf)?;
+                *position += n as u64;
+                Ok(n)
+            }
+        }
+    }
+}
+
+impl Seek for SourceReader {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        match self {
+            SourceReader::File(f) => f.seek(to),
+            SourceReader::Shared { reader, position } => {
+                let target = match to {
+                    SeekFrom::Start(n) => Some(n),
+                    SeekFrom::Current(d) => position.checked_add_signed(d),
+                    SeekFrom::End(_) => Some(reader.lock().map_err(|_| poisoned())?.seek(to)?),
+                };
+                *position = target.ok_or_else(|| {
+                    std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the start")
+                })?;
+                Ok(*position)
+            }
+        }
+    }
+}
+
+impl Source {
+    /// Starts a pass at the beginning.
+    fn open(&self) -> Result<SourceReader> {
+        match &self.reader {
+            None => open_file(&self.path).map(SourceReader::File),
+            Some(reader) => Ok(SourceReader::Shared {
+                reader: Arc::clone(reader),
+                position: 0,
+            }),
+        }
+    }
+
+    /// The length in bytes.
+    fn len(&self, pass: &mut SourceReader) -> Result<u64> {
+        let len = match pass {
+            SourceReader::File(f) => f.metadata().map(|m| m.len()),
+            SourceReader::Shared { .. } => pass.seek(SeekFrom::End(0)),
+        };
+        len.map_err(|e| Error::io("cannot stat MCAP file", &self.path, e))
+    }
+}
+
+/// An open input MCAP file (or any seekable reader, [`McapInput::from_reader`]).
+pub struct McapInput {
+    source: Source,
     profile: String,
     summary: Option<mcap::Summary>,
     schemas: BTreeMap<u16, InputSchema>,
@@ -311,11 +394,7 @@ fn open_file(path: &Path) -> Result<File> {
 }
 
 /// Reads the summary with the sans-IO summary reader (seeks to the footer; bounded memory).
-fn read_summary(file: &mut File, path: &Path) -> Result<Option<mcap::Summary>> {
-    let file_len = file
-        .metadata()
-        .map_err(|e| Error::io("cannot stat MCAP file", path, e))?
-        .len();
+fn read_summary(file: &mut impl ReadSeek, file_len: u64, path: &Path) -> Result<Option<mcap::Summary>> {
     let mut reader = SummaryReader::new_with_options(
         SummaryReaderOptions::default()
             .with_file_size(file_len)
@@ -341,7 +420,7 @@ fn read_summary(file: &mut File, path: &Path) -> Result<Option<mcap::Summary>> {
 }
 
 /// Reads the header record's profile (right after the 8-byte magic).
-fn read_profile(file: &mut File, path: &Path) -> Result<String> {
+fn read_profile(file: &mut impl ReadSeek, path: &Path) -> Result<String> {
     const MAGIC_BYTES: usize = 8;
     const RECORD_PREFIX_BYTES: usize = 9;
     // Header records hold two short strings; anything larger is a corrupt file.
@@ -383,12 +462,12 @@ fn read_profile(file: &mut File, path: &Path) -> Result<String> {
 /// Drives a [`LinearReader`] over a file, calling `f` for every record. A file that ends
 /// early (a recorder killed mid-write) is read up to its last complete record and reported
 /// with `Ok(true)` ("truncated"); other errors are errors.
-fn linear_records(path: &Path, mut f: impl FnMut(Record<'_>) -> Result<()>) -> Result<bool> {
-    let file = open_file(path)?;
-    let file_len = file
-        .metadata()
-        .map_err(|e| Error::io("cannot stat MCAP file", path, e))?
-        .len();
+fn linear_records(source: &Source, mut f: impl FnMut(Record<'_>) -> Result<()>) -> Result<bool> {
+    let path = &source.path;
+    let mut file = source.open()?;
+    let file_len = source.len(&mut file)?;
+    file.seek(SeekFrom::Start(0))
+        .map_err(|e| Error::io("cannot read MCAP file", path, e))?;
     let mut unread = file_len;
     let mut file = BufReader::with_capacity(READ_BUFFER_BYTES, file);
     let mut reader = LinearReader::new_with_options(
@@ -427,19 +506,49 @@ impl McapInput {
     /// [`Error::Io`] when the file cannot be read; [`Error::Dataset`] when it is not MCAP;
     /// [`Error::Mcap`] for corrupt records.
     pub fn open(path: &Path) -> Result<Self> {
-        let mut file = open_file(path)?;
-        let file_len = file
-            .metadata()
-            .map_err(|e| Error::io("cannot stat MCAP file", path, e))?
-            .len();
+        Self::from_source(Source {
+            path: path.to_owned(),
+            reader: None,
+        })
+    }
+
+    /// Reads an MCAP recording from any seekable reader (a [`std::io::Cursor`] over bytes in
+    /// memory, a file already open, ...); `name` is the path its errors and [`Self::path`]
+    /// give. Passes over the input share the reader, each seeking to its own position.
+    ///
+    /// # Errors
+    /// As [`Self::open`].
+    pub fn from_reader(reader: impl ReadSeek + 'static, name: &Path) -> Result<Self> {
+        Self::from_source(Source {
+            path: name.to_owned(),
+            reader: Some(Arc::new(Mutex::new(Box::new(reader)))),
+        })
+    }
+
+    /// Reads an MCAP recording held in memory; `name` as in [`Self::from_reader`].
+    ///
+    /// # Errors
+    /// As [`Self::open`].
+    pub fn from_bytes(bytes: impl Into<Vec<u8>>, name: &Path) -> Result<Self> {
+        Self::from_reader(Cursor::new(bytes.into()), name)
+    }
+
+    fn from_source(source: Source) -> Result<Self> {
+        let path = source.path.clone();
+        let path = path.as_path();
+        let mut file = source.open()?;
+        let file_len = source.len(&mut file)?;
         let profile = read_profile(&mut file, path)?;
         // A file without its footer (killed recorder) makes the summary reader fail: that is
         // the linear fallback's case, not an error.
-        let summary = read_summary(&mut file, path).ok().flatten().filter(|s| {
-            !s.chunk_indexes.is_empty() || s.stats.as_ref().is_some_and(|s| s.message_count == 0)
-        });
+        let summary = read_summary(&mut file, file_len, path)
+            .ok()
+            .flatten()
+            .filter(|s| {
+                !s.chunk_indexes.is_empty() || s.stats.as_ref().is_some_and(|s| s.message_count == 0)
+            });
         let mut input = Self {
-            path: path.to_owned(),
+            source,
             profile,
             summary,
             schemas: BTreeMap::new(),
@@ -473,13 +582,12 @@ impl McapInput {
     }
 
     fn linear_scan(&mut self) -> Result<()> {
-        let path = self.path.clone();
         let mut schemas = BTreeMap::new();
         let mut channels: BTreeMap<u16, InputChannel> = BTreeMap::new();
         let mut extras = Vec::new();
         let mut first = BTreeMap::new();
         let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
-        let truncated = linear_records(&path, |record| {
+        let truncated = linear_records(&self.source, |record| {
             match record {
                 Record::Schema { header, data } => {
                     schemas.insert(
@@ -541,7 +649,7 @@ impl McapInput {
             Ok(())
         })?;
         if truncated {
-            self.truncation = Some(find_truncation(&path, self.file_len)?);
+            self.truncation = Some(find_truncation(&self.source, self.file_len)?);
         }
         for (id, c) in &mut channels {
             c.message_count = Some(counts.get(id).copied().unwrap_or(0));
@@ -555,7 +663,7 @@ impl McapInput {
 
     /// The file's path.
     pub fn path(&self) -> &Path {
-        &self.path
+        &self.source.path
     }
 
     /// File size in bytes.
@@ -634,7 +742,7 @@ impl McapInput {
         let Some(summary) = &self.summary else {
             return Ok(self.linear_extras.clone());
         };
-        let mut file = open_file(&self.path)?;
+        let mut file = self.source.open()?;
         let mut spans: Vec<(u64, u64)> = summary
             .metadata_indexes
             .iter()
@@ -647,14 +755,14 @@ impl McapInput {
             const RECORD_PREFIX_BYTES: u64 = 9;
             if length < RECORD_PREFIX_BYTES || offset.saturating_add(length) > self.file_len {
                 return Err(mcap_error(
-                    &self.path,
+                    self.path(),
                     "metadata or attachment index points outside the file",
                 ));
             }
             let mut buf = vec![0u8; length as usize];
             file.seek(SeekFrom::Start(offset))
                 .and_then(|_| file.read_exact(&mut buf))
-                .map_err(|e| Error::io("cannot read MCAP record", &self.path, e))?;
+                .map_err(|e| Error::io("cannot read MCAP record", self.path(), e))?;
             match mcap::parse_record(buf[0], &buf[RECORD_PREFIX_BYTES as usize..])? {
                 Record::Metadata(m) => out.push(ExtraRecord::Metadata(m)),
                 Record::Attachment { header, data, .. } => out.push(ExtraRecord::Attachment {
@@ -666,7 +774,7 @@ impl McapInput {
                 }),
                 _ => {
                     return Err(mcap_error(
-                        &self.path,
+                        self.path(),
                         "metadata or attachment index points at another record",
                     ))
                 }
@@ -697,7 +805,7 @@ impl McapInput {
         let in_range = |t: u64| time_range.is_none_or(|(s, e)| t >= s && t < e);
         let Some(summary) = &self.summary else {
             let mut stopped = false;
-            linear_records(&self.path, |record| {
+            linear_records(&self.source, |record| {
                 if stopped {
                     return Ok(());
                 }
@@ -733,7 +841,7 @@ impl McapInput {
                 crc: Arc::clone(&crc),
             })?;
         }
-        let mut file = open_file(&self.path)?;
+        let mut file = self.source.open()?;
         let mut chunk = Vec::new();
         while let Some(event) = reader.next_event() {
             match event? {
@@ -751,7 +859,7 @@ impl McapInput {
                     chunk.resize(header_len + length, 0);
                     file.seek(SeekFrom::Start(start))
                         .and_then(|_| file.read_exact(&mut chunk))
-                        .map_err(|e| Error::io("cannot read MCAP chunk", &self.path, e))?;
+                        .map_err(|e| Error::io("cannot read MCAP chunk", self.path(), e))?;
                     let (header, data) = chunk.split_at(header_len);
                     let expected_crc = match index {
                         Some(index) => {
@@ -870,7 +978,7 @@ impl McapInput {
         // its (log time, offset) pairs of 16 bytes each.
         const PREFIX_BYTES: usize = 1 + 8 + 2 + 4;
         const ENTRY_BYTES: u64 = 16;
-        let mut file = File::open(&self.path).ok()?;
+        let mut file = self.source.open().ok()?;
         let mut total = 0;
         for offset in index.message_index_offsets.values() {
             let mut prefix = [0u8; PREFIX_BYTES];
@@ -901,7 +1009,7 @@ impl McapInput {
             None => "a chunk".to_owned(),
         };
         mcap_error(
-            &self.path,
+            self.path(),
             format!(
                 "damaged {place}: {what}; the other chunks are intact (`mcap recover` copies them to a \
                  new file)"

@@ -2,6 +2,8 @@
 //! and Bayer mosaics. Every decoder checks declared sizes against the data before writing and
 //! fails with a message instead of reading past the end.
 
+use crate::mcap_io::encoding::BayerFilter;
+
 /// Bytes of the header `compressed_depth_image_transport` writes before an RVL stream: the
 /// image's width and height as little-endian `u32`.
 pub const RVL_SIZE_HEADER_BYTES: usize = 8;
@@ -164,20 +166,18 @@ pub fn gray_from_video_luma(y: u8) -> f32 {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BayerPattern([u8; 4]);
 
-impl BayerPattern {
-    /// The pattern of a ROS encoding `bayer_rggb8`, `bayer_bggr8`, `bayer_gbrg8`,
-    /// `bayer_grbg8`; `None` for others.
-    pub fn from_encoding(encoding: &str) -> Option<Self> {
-        let cells = match encoding {
-            "bayer_rggb8" => [0, 1, 1, 2],
-            "bayer_bggr8" => [2, 1, 1, 0],
-            "bayer_gbrg8" => [1, 2, 0, 1],
-            "bayer_grbg8" => [1, 0, 2, 1],
-            _ => return None,
-        };
-        Some(Self(cells))
+impl From<BayerFilter> for BayerPattern {
+    fn from(filter: BayerFilter) -> Self {
+        Self(match filter {
+            BayerFilter::Rggb => [0, 1, 1, 2],
+            BayerFilter::Bggr => [2, 1, 1, 0],
+            BayerFilter::Gbrg => [1, 2, 0, 1],
+            BayerFilter::Grbg => [1, 0, 2, 1],
+        })
     }
+}
 
+impl BayerPattern {
     fn channel(self, x: usize, y: usize) -> usize {
         usize::from(self.0[(y % 2) * 2 + x % 2])
     }
@@ -268,8 +268,13 @@ mod tests {
         // A uniform colour (r, g, b) mosaicked with each pattern demosaics back to (r, g, b)
         // everywhere, borders included.
         let (r, g, b) = (200u8, 120u8, 40u8);
-        for encoding in ["bayer_rggb8", "bayer_bggr8", "bayer_gbrg8", "bayer_grbg8"] {
-            let pattern = BayerPattern::from_encoding(encoding).unwrap();
+        for encoding in [
+            BayerFilter::Rggb,
+            BayerFilter::Bggr,
+            BayerFilter::Gbrg,
+            BayerFilter::Grbg,
+        ] {
+            let pattern = BayerPattern::from(encoding);
             let mosaic: Vec<Vec<u8>> = (0..5)
                 .map(|y| (0..6).map(|x| [r, g, b][pattern.channel(x, y)]).collect())
                 .collect();
@@ -279,12 +284,11 @@ mod tests {
                     assert_eq!(
                         demosaic_pixel(&rows, pattern, x, y),
                         [r, g, b],
-                        "{encoding} ({x},{y})"
+                        "{encoding:?} ({x},{y})"
                     );
                 }
             }
         }
-        assert!(BayerPattern::from_encoding("bayer_rggb16").is_none());
     }
 
     #[test]

@@ -1,12 +1,13 @@
 //! ROS 1 message layouts as serde structs, read with the bounded ROS 1 reader of `cdr_read`
 //! (little-endian, packed, `u32`-length-prefixed strings and variable arrays, fixed arrays
 //! without a length), as ROS 1 bags converted to MCAP hold them (`ros1` message encoding,
-//! `ros1msg` schemas). Field order is the wire order. Geometry messages (points, quaternions,
-//! poses, transforms) have the same layout as in ROS 2 and reuse [`super::ros2`]'s structs.
+//! `ros1msg` schemas). Field order is the wire order. Only the header differs from ROS 2
+//! (a sequence number, an unsigned `time`), so every message is [`super::ros2`]'s struct with
+//! this module's [`Header`].
 
 use serde::{Deserialize, Serialize};
 
-use super::ros2::{Pose, Transform};
+use super::ros2;
 
 /// ROS 1 `time`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -29,94 +30,18 @@ pub struct Header {
 }
 
 /// `sensor_msgs/Image`.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Image {
-    /// Header.
-    pub header: Header,
-    /// Rows.
-    pub height: u32,
-    /// Columns.
-    pub width: u32,
-    /// Pixel encoding.
-    pub encoding: String,
-    /// 1 when multi-byte pixels are big-endian.
-    pub is_bigendian: u8,
-    /// Bytes per row.
-    pub step: u32,
-    /// Pixels.
-    #[serde(with = "serde_bytes")]
-    pub data: Vec<u8>,
-}
-
+pub type Image = ros2::Image<Header>;
 /// `sensor_msgs/CompressedImage`.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct CompressedImage {
-    /// Header.
-    pub header: Header,
-    /// `jpeg`, `png`, `16UC1; compressedDepth`, ...
-    pub format: String,
-    /// The compressed bytes.
-    #[serde(with = "serde_bytes")]
-    pub data: Vec<u8>,
-}
-
-/// `sensor_msgs/CameraInfo` (ROS 1 field names: upper-case `D`, `K`, `R`, `P`).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct CameraInfo {
-    /// Header.
-    pub header: Header,
-    /// Rows.
-    pub height: u32,
-    /// Columns.
-    pub width: u32,
-    /// Distortion model name.
-    pub distortion_model: String,
-    /// Distortion coefficients.
-    #[serde(rename = "D")]
-    pub d: Vec<f64>,
-    /// Intrinsic matrix, row-major.
-    #[serde(rename = "K")]
-    pub k: [f64; 9],
-    /// Rectification rotation, row-major.
-    #[serde(rename = "R")]
-    pub r: [f64; 9],
-    /// Projection matrix, row-major 3×4.
-    #[serde(rename = "P")]
-    pub p: [f64; 12],
-    /// Horizontal binning.
-    pub binning_x: u32,
-    /// Vertical binning.
-    pub binning_y: u32,
-    /// Region of interest (same layout as ROS 2).
-    pub roi: super::ros2::RegionOfInterest,
-}
-
+pub type CompressedImage = ros2::CompressedImage<Header>;
+/// `sensor_msgs/CameraInfo` (ROS 1 names the matrices upper-case `D`, `K`, `R`, `P`; the
+/// wire layout is ROS 2's).
+pub type CameraInfo = ros2::CameraInfo<Header>;
 /// `geometry_msgs/PoseStamped`.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct PoseStamped {
-    /// Header.
-    pub header: Header,
-    /// The pose.
-    pub pose: Pose,
-}
-
+pub type PoseStamped = ros2::PoseStamped<Header>;
 /// `geometry_msgs/TransformStamped`.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct TransformStamped {
-    /// Header (frame = parent).
-    pub header: Header,
-    /// Child frame.
-    pub child_frame_id: String,
-    /// parent_from_child.
-    pub transform: Transform,
-}
-
+pub type TransformStamped = ros2::TransformStamped<Header>;
 /// `tf2_msgs/TFMessage` and `tf/tfMessage` (same layout).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct TfMessage {
-    /// The transforms.
-    pub transforms: Vec<TransformStamped>,
-}
+pub type TfMessage = ros2::TfMessage<Header>;
 
 /// ROS 1 type names (schema names in MCAP files converted from ROS 1 bags).
 pub mod names {

@@ -23,9 +23,9 @@ pub struct Header {
 
 /// `sensor_msgs/msg/Image`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Image {
-    /// Header.
-    pub header: Header,
+pub struct Image<H = Header> {
+    /// Header; the ROS 1 layout differs only here ([`super::ros1::Header`]).
+    pub header: H,
     /// Rows.
     pub height: u32,
     /// Columns.
@@ -43,9 +43,9 @@ pub struct Image {
 
 /// `sensor_msgs/msg/CompressedImage`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct CompressedImage {
-    /// Header.
-    pub header: Header,
+pub struct CompressedImage<H = Header> {
+    /// Header; the ROS 1 layout differs only here ([`super::ros1::Header`]).
+    pub header: H,
     /// `jpeg`, `png`, `rgb8; jpeg compressed bgr8`, `16UC1; compressedDepth png`, ...
     pub format: String,
     /// The compressed bytes.
@@ -70,9 +70,9 @@ pub struct RegionOfInterest {
 
 /// `sensor_msgs/msg/CameraInfo`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct CameraInfo {
-    /// Header.
-    pub header: Header,
+pub struct CameraInfo<H = Header> {
+    /// Header; the ROS 1 layout differs only here ([`super::ros1::Header`]).
+    pub header: H,
     /// Rows.
     pub height: u32,
     /// Columns.
@@ -130,9 +130,9 @@ pub struct Pose {
 
 /// `geometry_msgs/msg/PoseStamped`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct PoseStamped {
-    /// Header (frame = the frame the pose is expressed in).
-    pub header: Header,
+pub struct PoseStamped<H = Header> {
+    /// Header (frame = the frame the pose is expressed in); the ROS 1 layout differs only here ([`super::ros1::Header`]).
+    pub header: H,
     /// The pose.
     pub pose: Pose,
 }
@@ -148,9 +148,9 @@ pub struct Transform {
 
 /// `geometry_msgs/msg/TransformStamped`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct TransformStamped {
-    /// Header (frame = parent).
-    pub header: Header,
+pub struct TransformStamped<H = Header> {
+    /// Header (frame = parent); the ROS 1 layout differs only here ([`super::ros1::Header`]).
+    pub header: H,
     /// Child frame.
     pub child_frame_id: String,
     /// parent_from_child.
@@ -159,9 +159,9 @@ pub struct TransformStamped {
 
 /// `tf2_msgs/msg/TFMessage`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct TfMessage {
+pub struct TfMessage<H = Header> {
     /// The transforms.
-    pub transforms: Vec<TransformStamped>,
+    pub transforms: Vec<TransformStamped<H>>,
 }
 
 /// ROS 2 type names (schema names in rosbag2 MCAP files).

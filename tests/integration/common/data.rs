@@ -7,7 +7,7 @@
 //!   `../shared/data` beside the crate. Without them a test prints one line saying it was
 //!   skipped and why, and returns; with `OCCMASK_DATA` set (as `.ci/run` does) a missing
 //!   sequence fails the test instead, so CI never skips.
-#![allow(dead_code)] // each crate that includes this file uses a different subset
+#![allow(dead_code)] // the benchmarks and examples that include this file use a subset
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -2,14 +2,16 @@
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns: a panic is the failure report
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 
+use common::recording;
 use common::*;
-use occmask::mcap_io::codec::{mask_from_raw, timestamp_ns};
+use foxglove::messages as fm;
+use occmask::mcap_io::codec::timestamp_ns;
 use occmask::mcap_io::{
-    Decoded, McapFileReader, TOPIC_COLOR_IMAGE, TOPIC_DEPTH_IMAGE, TOPIC_GROUNDTRUTH_MASK,
+    SCHEMA_COMPRESSED_IMAGE, TOPIC_COLOR_IMAGE, TOPIC_DEPTH_IMAGE, TOPIC_GROUNDTRUTH_MASK,
 };
 
 /// Converts `dir` (TUM layout unless `args` say otherwise) into `<tmp>/out.mcap`.
@@ -395,11 +397,8 @@ fn unpaired_frames_are_reported_and_kept_on_request() {
 }
 
 fn read_topic_stamps(path: &Path, topic: &str) -> Vec<u64> {
-    let reader = McapFileReader::open(path).unwrap();
-    reader
-        .messages()
-        .unwrap()
-        .map(Result::unwrap)
+    recording::messages(&recording::open(path))
+        .into_iter()
         .filter(|m| m.topic == topic)
         .map(|m| m.log_time_ns)
         .collect()
@@ -413,29 +412,25 @@ fn larr_fixture_converts_with_masks() {
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     assert!(stderr(&out).contains("4 masks"), "{}", stderr(&out));
 
-    let reader = McapFileReader::open(&out_path).unwrap();
-    let channels = reader.channels();
-    let depth = channels.iter().find(|c| c.topic == TOPIC_DEPTH_IMAGE).unwrap();
+    let input = recording::open(&out_path);
+    let depth = input.channel_by_topic(TOPIC_DEPTH_IMAGE).unwrap();
     assert_eq!(
         depth.metadata.get("depth_units_per_meter").map(String::as_str),
         Some("1000")
     );
     let color_stamps = read_topic_stamps(&out_path, TOPIC_COLOR_IMAGE);
     let mut mask_stamps = Vec::new();
-    for m in reader.messages().unwrap() {
-        let m = m.unwrap();
+    for m in recording::messages(&input) {
         if m.topic != TOPIC_GROUNDTRUTH_MASK {
             continue;
         }
-        let Decoded::RawImage(raw) = &m.message else {
-            panic!("mask must be a RawImage")
-        };
+        let raw: fm::RawImage = m.decode();
         assert_eq!(raw.encoding, "mono8");
         assert_eq!(timestamp_ns(raw.timestamp.as_ref()), m.log_time_ns);
-        let mask = mask_from_raw(raw, &m.topic).unwrap();
-        assert_eq!((mask.width(), mask.height()), (160, 120));
-        let set = mask.as_slice().iter().filter(|&&v| v == 255).count();
-        assert!(mask.as_slice().iter().all(|&v| v == 0 || v == 255));
+        assert_eq!((raw.width, raw.height, raw.step), (160, 120, 160));
+        assert_eq!(raw.data.len(), 160 * 120);
+        let set = raw.data.iter().filter(|&&v| v == 255).count();
+        assert!(raw.data.iter().all(|&v| v == 0 || v == 255));
         // The mug polygon covers ~2200 px at full resolution, ~140 px at 1/16 area.
         assert!((100..200).contains(&set), "{set} mask pixels");
         mask_stamps.push(m.log_time_ns);
@@ -486,12 +481,12 @@ fn jpeg_colour_passes_through_unchanged() {
     let out_path = tmp.path().join("out.mcap");
     let out = convert("tum", &dir, &out_path, &["--camera", "kinect-default", "-q"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    let reader = McapFileReader::open(&out_path).unwrap();
     let rgb_list = std::fs::read_to_string(dir.join("rgb.txt")).unwrap();
     let mut files = rgb_list.lines().map(|l| l.split_once(' ').unwrap().1.to_owned());
     let mut n = 0;
-    for m in reader.messages().unwrap() {
-        if let Decoded::CompressedImage(img) = m.unwrap().message {
+    for m in recording::messages(&recording::open(&out_path)) {
+        if m.schema_name == SCHEMA_COMPRESSED_IMAGE {
+            let img: fm::CompressedImage = m.decode();
             assert_eq!(img.format, "jpeg");
             assert_eq!(
                 img.data.as_ref(),
@@ -508,16 +503,12 @@ fn icsl_uses_millimetres_and_the_icsl_camera() {
     let c = tum_case();
     let out = convert("icsl", &c.dir, &c.out, &["-q"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    let reader = McapFileReader::open(&c.out).unwrap();
-    let md = &reader.metadata().unwrap()[0].metadata;
+    let input = recording::open(&c.out);
+    let md = &recording::metadata(&input)[0].metadata;
     assert_eq!(md["dataset_kind"], "icsl");
     assert_eq!(md["depth_units_per_meter"], "1000");
     assert_eq!(md["intrinsics_fx_fy_cx_cy"], "537.6,539,316.1,245.5");
-    let depth = reader
-        .channels()
-        .into_iter()
-        .find(|ch| ch.topic == TOPIC_DEPTH_IMAGE)
-        .unwrap();
+    let depth = input.channel_by_topic(TOPIC_DEPTH_IMAGE).unwrap();
     assert_eq!(depth.metadata["depth_units_per_meter"], "1000");
 }
 

@@ -3,7 +3,7 @@
 
 #![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
 
-mod process_support;
+use crate::common::mcap_fixture as process_support;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

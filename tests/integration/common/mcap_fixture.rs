@@ -2,7 +2,7 @@
 //! CDR, ROS 1) with the same pixels, stamps, calibration and poses, plus a deterministic
 //! [`FrameProcessor`] whose outputs depend on every decoded pixel, so equal outputs across
 //! flavours mean equal decoding.
-#![allow(dead_code, clippy::unwrap_used)] // shared by several test crates and the bench
+#![allow(clippy::unwrap_used)] // test helpers: a panic is the failure report
 
 use std::collections::BTreeMap;
 use std::io::{Cursor, Seek, Write};

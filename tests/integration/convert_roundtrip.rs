@@ -1,34 +1,31 @@
 //! Round trip: convert the TUM fr2_desk excerpt in fixtures/ with the binary, read it back with the
-//! library's reader, and compare with the source files decoded independently (the `image`
-//! crate, the text files): every colour byte, depth pixel, timestamp and pose.
+//! library's reader (`McapInput`, messages decoded here with `prost`), and compare with the
+//! source files decoded independently (the `image` crate, the text files): every colour byte,
+//! depth pixel, timestamp and pose.
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns: a panic is the failure report
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use common::recording::{self, Message};
 use common::*;
+use foxglove::messages as fm;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use occmask::geometry::camera::presets;
-use occmask::image_buf::ImageSize;
-use occmask::mcap_io::codec::{
-    depth_u16_from_raw, intrinsics_from_calibration, isometry_from_parts, timestamp_ns,
-};
+use occmask::geometry::PinholeIntrinsics;
+use occmask::mcap_io::codec::timestamp_ns;
 use occmask::mcap_io::*;
-use occmask::time::parse_seconds_to_ns;
 use occmask::trajectory::parse_tum_line;
 
-/// `(timestamp_ns, path)` of a TUM list file, parsed independently of the library's reader.
+/// `(timestamp_ns, path)` of a TUM list file, read by the library's list reader.
 fn list(dir: &Path, name: &str) -> Vec<(u64, std::path::PathBuf)> {
-    std::fs::read_to_string(dir.join(name))
+    occmask::dataset::read_image_list(&dir.join(name), dir)
         .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| {
-            let (t, p) = l.split_once(' ').unwrap();
-            (parse_seconds_to_ns(t).unwrap(), dir.join(p.trim()))
-        })
+        .into_iter()
+        .map(|image| (image.timestamp_ns, image.path))
         .collect()
 }
 
@@ -59,8 +56,8 @@ fn tum_fr2_desk_round_trips_exactly() {
         (TUM_FIXTURE_FRAMES, TUM_FIXTURE_FRAMES, 154)
     );
 
-    let reader = McapFileReader::open(&out_path).unwrap();
-    let channels = reader.channels();
+    let input = recording::open(&out_path);
+    let channels: Vec<_> = input.channels().values().collect();
     let topics: Vec<(&str, &str)> = channels
         .iter()
         .map(|c| (c.topic.as_str(), c.schema_name.as_str()))
@@ -81,10 +78,9 @@ fn tum_fr2_desk_round_trips_exactly() {
         Some("5000")
     );
 
-    let mut by_topic: BTreeMap<String, Vec<ReadMessage>> = BTreeMap::new();
+    let mut by_topic: BTreeMap<String, Vec<Message>> = BTreeMap::new();
     let mut last_log_time = 0;
-    for m in reader.messages().unwrap() {
-        let m = m.unwrap();
+    for m in recording::messages(&input) {
         assert!(
             m.log_time_ns >= last_log_time,
             "messages must be in log-time order"
@@ -97,9 +93,8 @@ fn tum_fr2_desk_round_trips_exactly() {
     let colour = &by_topic[TOPIC_COLOR_IMAGE];
     assert_eq!(colour.len(), rgb.len());
     for (m, (t, path)) in colour.iter().zip(&rgb) {
-        let Decoded::CompressedImage(img) = &m.message else {
-            panic!("colour must be CompressedImage")
-        };
+        assert_eq!(m.schema_name, SCHEMA_COMPRESSED_IMAGE);
+        let img: fm::CompressedImage = m.decode();
         assert_eq!(m.log_time_ns, *t);
         assert_eq!(timestamp_ns(img.timestamp.as_ref()), *t);
         assert_eq!(img.format, "png");
@@ -114,14 +109,18 @@ fn tum_fr2_desk_round_trips_exactly() {
         let infos = &by_topic[topic];
         assert_eq!(infos.len(), stamps.len());
         for (m, (t, _)) in infos.iter().zip(stamps) {
-            let Decoded::CameraCalibration(cal) = &m.message else {
-                panic!("{topic} must be CameraCalibration")
-            };
+            assert_eq!(m.schema_name, SCHEMA_CAMERA_CALIBRATION, "{topic}");
+            let cal: fm::CameraCalibration = m.decode();
             assert_eq!(m.log_time_ns, *t);
             assert_eq!(timestamp_ns(cal.timestamp.as_ref()), *t);
+            let k = &cal.k;
             assert_eq!(
-                intrinsics_from_calibration(cal, topic).unwrap(),
-                (presets::TUM_FR2, ImageSize::new(640, 480))
+                (
+                    PinholeIntrinsics::new(k[0], k[4], k[2], k[5]),
+                    cal.width,
+                    cal.height
+                ),
+                (presets::TUM_FR2, 640, 480)
             );
         }
     }
@@ -130,17 +129,20 @@ fn tum_fr2_desk_round_trips_exactly() {
     let depth_msgs = &by_topic[TOPIC_DEPTH_IMAGE];
     assert_eq!(depth_msgs.len(), depth.len());
     for (m, (t, path)) in depth_msgs.iter().zip(&depth) {
-        let Decoded::RawImage(raw) = &m.message else {
-            panic!("depth must be RawImage")
-        };
+        assert_eq!(m.schema_name, SCHEMA_RAW_IMAGE);
+        let raw: fm::RawImage = m.decode();
         assert_eq!(m.log_time_ns, *t);
         assert_eq!(raw.encoding, "16UC1");
-        let (size, pixels) = depth_u16_from_raw(raw, TOPIC_DEPTH_IMAGE).unwrap();
         let expected = image::open(path).unwrap().into_luma16();
         assert_eq!(
-            size,
-            ImageSize::new(expected.width() as usize, expected.height() as usize)
+            (raw.width, raw.height, raw.step),
+            (expected.width(), expected.height(), 2 * expected.width())
         );
+        let pixels: Vec<u16> = raw
+            .data
+            .chunks_exact(2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+            .collect();
         assert!(
             pixels == expected.into_raw(),
             "depth pixels differ: {}",
@@ -161,8 +163,9 @@ fn tum_fr2_desk_round_trips_exactly() {
                 .collect();
             let expected = parse_tum_line(line).unwrap();
             // Raw protobuf fields, compared bit for bit.
-            let (stamp, position, orientation) = match &m.message {
-                Decoded::PoseInFrame(p) => {
+            let (stamp, position, orientation) = match m.schema_name.as_str() {
+                SCHEMA_POSE_IN_FRAME => {
+                    let p: fm::PoseInFrame = m.decode();
                     assert_eq!(p.frame_id, FRAME_WORLD);
                     let pose = p.pose.as_ref().unwrap();
                     (
@@ -171,7 +174,8 @@ fn tum_fr2_desk_round_trips_exactly() {
                         pose.orientation.unwrap(),
                     )
                 }
-                Decoded::FrameTransform(tf) => {
+                SCHEMA_FRAME_TRANSFORM => {
+                    let tf: fm::FrameTransform = m.decode();
                     assert_eq!(
                         (tf.parent_frame_id.as_str(), tf.child_frame_id.as_str()),
                         (FRAME_WORLD, FRAME_CAMERA_GROUNDTRUTH)
@@ -182,7 +186,7 @@ fn tum_fr2_desk_round_trips_exactly() {
                         tf.rotation.unwrap(),
                     )
                 }
-                other => panic!("unexpected {other:?}"),
+                other => panic!("unexpected schema {other:?}"),
             };
             assert_eq!(
                 (m.log_time_ns, stamp),
@@ -195,7 +199,10 @@ fn tum_fr2_desk_round_trips_exactly() {
             let e = expected.world_from_camera.rotation;
             let q = [orientation.x, orientation.y, orientation.z, orientation.w];
             assert_eq!(q, [e.i, e.j, e.k, e.w]);
-            let iso = isometry_from_parts(Some(&position), Some(&orientation), topic).unwrap();
+            let iso = Isometry3::from_parts(
+                Translation3::new(position.x, position.y, position.z),
+                UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2])),
+            );
             assert!(
                 (iso.to_homogeneous() - expected.world_from_camera.to_homogeneous())
                     .abs()
@@ -210,7 +217,7 @@ fn tum_fr2_desk_round_trips_exactly() {
     }
 
     // Metadata and attachments.
-    let metadata = reader.metadata().unwrap();
+    let metadata = recording::metadata(&input);
     assert_eq!(metadata.len(), 1);
     let md = &metadata[0].metadata;
     assert_eq!(metadata[0].name, METADATA_CONVERT);
@@ -219,8 +226,8 @@ fn tum_fr2_desk_round_trips_exactly() {
     assert_eq!(md["intrinsics_source"], "folder name (fr2)");
     assert_eq!(md["pairs"], TUM_FIXTURE_FRAMES.to_string());
     assert!(md["command_line"].contains("convert tum"));
-    let attachments = reader.attachments().unwrap();
-    let names: Vec<&str> = attachments.iter().map(|a| a.name.as_str()).collect();
+    let attachments = recording::attachments(&input);
+    let names: Vec<&str> = attachments.iter().map(|(name, _)| name.as_str()).collect();
     assert_eq!(
         names,
         vec![
@@ -230,9 +237,9 @@ fn tum_fr2_desk_round_trips_exactly() {
             "groundtruth.txt"
         ]
     );
-    assert_eq!(attachments[3].data, gt_text.as_bytes());
+    assert_eq!(attachments[3].1, gt_text.as_bytes());
     assert_eq!(
-        attachments[0].data.iter().filter(|&&b| b == b'\n').count(),
+        attachments[0].1.iter().filter(|&&b| b == b'\n').count(),
         TUM_FIXTURE_FRAMES + 1
     );
 }

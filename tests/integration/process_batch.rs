@@ -8,8 +8,7 @@
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-#[path = "common/data.rs"]
-mod data;
+use crate::common::data;
 
 use occmask::convert::{convert_sequence, resolve_intrinsics, ConvertConfig, DEFAULT_BATCH_EVENTS};
 use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};

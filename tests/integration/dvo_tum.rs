@@ -9,11 +9,9 @@
 //! ground truth's: DVO and Open3D agree with each other far better than with the mocap.
 #![allow(clippy::unwrap_used)] // test helpers: a panic is the failure report
 
-#[path = "common/tum.rs"]
-mod tum;
+use crate::common::tum;
 
-#[path = "common/data.rs"]
-mod data;
+use crate::common::data;
 
 use std::path::Path;
 
@@ -69,19 +67,22 @@ fn fr2_desk_50_relative_pose_error_is_bounded() {
 }
 
 fn check_sequence(name: &str, dir: &Path, bounds: &Bounds) {
-    let (frames, gt) = tum::load_sequence(dir).unwrap_or_else(|e| panic!("{name}: {e}"));
-    assert_eq!(frames.len(), bounds.frames);
+    let sequence = tum::TumSequence::load(dir).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let gt = sequence.groundtruth();
+    assert_eq!(sequence.pairs.len(), bounds.frames);
     let mut tracker = None;
     let (mut errs_t, mut errs_r) = (Vec::new(), Vec::new());
     let mut poses = Vec::new();
     let mut worst_cost_fraction = 0.0f64;
     let mut worst_pair = (0.0f64, 0.0f64);
-    for (i, f) in frames.iter().enumerate() {
-        let (gray, depth) = tum::load_frame(f).unwrap();
+    let mut previous_ns = 0;
+    for i in 0..sequence.pairs.len() {
+        let f = sequence.frame(i).unwrap();
+        let reference_ns = std::mem::replace(&mut previous_ns, f.timestamp_ns);
         let tracker = tracker.get_or_insert_with(|| {
-            DvoTracker::new(gray.size(), presets::TUM_FR2, DvoConfig::paper()).unwrap()
+            DvoTracker::new(f.gray.size(), presets::TUM_FR2, DvoConfig::paper()).unwrap()
         });
-        let Some(est) = tracker.track(&gray, &depth, None, None).unwrap() else {
+        let Some(est) = tracker.track(&f.gray, &f.depth_m, None, None).unwrap() else {
             poses.push(StampedPose {
                 timestamp_ns: f.timestamp_ns,
                 world_from_camera: nalgebra::Isometry3::identity(),
@@ -99,8 +100,7 @@ fn check_sequence(name: &str, dir: &Path, bounds: &Bounds) {
             timestamp_ns: f.timestamp_ns,
             world_from_camera: chain(&last, &est.current_from_reference),
         });
-        let truth =
-            tum::gt_motion(&gt, frames[i - 1].timestamp_ns, f.timestamp_ns).expect("GT covers the window");
+        let truth = tum::gt_motion(gt, reference_ns, f.timestamp_ns).expect("GT covers the window");
         let (et, er) = tum::rpe(&est.current_from_reference, &truth);
         assert!(
             et < bounds.pair_trans_mm && er < bounds.pair_rot_deg,

@@ -4,7 +4,7 @@
 
 #![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
 
-mod process_support;
+use crate::common::mcap_fixture as process_support;
 
 use std::collections::BTreeMap;
 use std::io::Cursor;
@@ -547,6 +547,7 @@ mod geometry {
     use std::path::{Path, PathBuf};
     use std::sync::{Arc, Mutex};
 
+    use foxglove::messages as fm;
     use occmask::convert::{rig_names, write_synthetic_rig_recording};
     use occmask::geometry::distortion::CameraModel;
     use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Mask, MASK_SET};
@@ -779,11 +780,9 @@ mod geometry {
             .map(|m| m.unwrap())
             .find(|m| m.channel.topic == occmask::mcap_io::annotate::TOPIC_MASK)
             .unwrap();
-        let mask = occmask::mcap_io::codec::mask_from_raw(
-            &prost::Message::decode(mask_msg.data.as_ref()).unwrap(),
-            "/m",
-        )
-        .unwrap();
+        let raw: fm::RawImage = prost::Message::decode(mask_msg.data.as_ref()).unwrap();
+        let size = ImageSize::new(raw.width as usize, raw.height as usize);
+        let mask = Mask::from_vec(size, raw.data.to_vec()).unwrap();
         let pinhole = occmask::registration::inscribed_pinhole(&rig.color);
         let quarter = rig.color.size.width * 3 / 4;
         let (mut wrong, mut moved) = (0, 0);

@@ -12,15 +12,14 @@
 //! and restart there, instead of keeping the misregistered depth edges as false positives.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use nalgebra::Isometry3;
 use occmask::geometry::PinholeIntrinsics;
-use occmask::image_buf::{depth_m_from_u16_into, gray_from_rgb8, DepthMeters, GrayF32, Image, ImageSize};
+use occmask::image_buf::ImageSize;
 use occmask::occlusion::{OcclusionConfig, OcclusionDetector};
 use occmask::pipeline::{FrameInput, Processor, ProcessorConfig};
-use occmask::time::parse_seconds_to_ns;
-use occmask::trajectory::{interpolate, parse_tum_line, StampedPose};
+use occmask::trajectory::interpolate;
 
 /// Frames ignored at the start: the first frame only initialises the detector, and a few more
 /// let the compensated depth settle.
@@ -28,67 +27,31 @@ const WARM_UP_FRAMES: usize = 5;
 /// Largest gap between bracketing ground-truth poses for interpolation (TUM mocap is ~100 Hz).
 const MAX_GT_GAP_NS: u64 = 50_000_000;
 
-#[path = "common/data.rs"]
-mod data;
-
-fn list(dir: &Path, file: &str) -> Vec<(u64, PathBuf)> {
-    std::fs::read_to_string(dir.join(file))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| {
-            let mut fields = l.split_whitespace();
-            let t = parse_seconds_to_ns(fields.next().unwrap()).unwrap();
-            (t, dir.join(fields.next().unwrap()))
-        })
-        .collect()
-}
-
-fn ground_truth(dir: &Path) -> Vec<StampedPose> {
-    std::fs::read_to_string(dir.join("groundtruth.txt"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| parse_tum_line(l).unwrap())
-        .collect()
-}
-
-fn load_depth(path: &Path, depth: &mut DepthMeters) {
-    let image = image::open(path).unwrap().into_luma16();
-    depth_m_from_u16_into(image.as_raw(), 5000.0, depth).unwrap();
-}
-
-fn load_gray(path: &Path) -> GrayF32 {
-    let rgb = image::open(path).unwrap().into_rgb8();
-    let size = ImageSize::new(rgb.width() as usize, rgb.height() as usize);
-    let pixels = rgb.pixels().map(|p| p.0).collect();
-    gray_from_rgb8(&Image::from_vec(size, pixels).unwrap())
-}
+use crate::common::{data, tum::TumSequence};
 
 /// Runs the detector with ground-truth poses; returns the per-frame false-positive fractions and
 /// the frames whose motion the detector rejected.
 fn false_positive_fractions(dir: &Path, intrinsics: PinholeIntrinsics) -> (Vec<f64>, Vec<usize>) {
-    let depth_files = list(dir, "depth.txt");
-    let rgb_files = list(dir, "rgb.txt");
-    let truth = ground_truth(dir);
+    let sequence = TumSequence::load(dir).unwrap();
+    let truth = sequence.groundtruth();
     let size = ImageSize::new(640, 480);
     let mut detector = OcclusionDetector::new(size, intrinsics, OcclusionConfig::default()).unwrap();
-    let mut depth = Image::filled(size, 0.0f32);
     let mut previous: Option<Isometry3<f64>> = None;
     let mut fractions = Vec::new();
     let mut rejected = Vec::new();
-    for (t, path) in depth_files {
-        let Some(world_from_camera) = interpolate(&truth, t, MAX_GT_GAP_NS) else {
+    // Each depth frame with the nearest colour image, for the default appearance growth
+    // (7-Scenes: colour is not registered to depth, which the growth's gates must tolerate).
+    for pair in sequence.depth_with_nearest_color() {
+        let t = sequence.sequence.depth[pair.depth].timestamp_ns;
+        let Some(world_from_camera) = interpolate(truth, t, MAX_GT_GAP_NS) else {
             continue;
         };
-        load_depth(&path, &mut depth);
+        let frame = sequence.decode(&pair).unwrap();
         let motion = previous.map_or_else(Isometry3::identity, |p| world_from_camera.inverse() * p);
         previous = Some(world_from_camera);
-        // The nearest colour image, for the default appearance growth (7-Scenes: colour is not
-        // registered to depth, which the growth's gates must tolerate).
-        let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
-        let gray = load_gray(rgb_path);
-        let mask = detector.update_with_gray(&depth, Some(&gray), &motion).unwrap();
+        let mask = detector
+            .update_with_gray(&frame.depth_m, Some(&frame.gray), &motion)
+            .unwrap();
         let set = mask.as_slice().iter().filter(|&&m| m != 0).count();
         if detector.stats().motion_rejected {
             rejected.push(fractions.len());
@@ -170,22 +133,19 @@ fn tum_fr2_desk_static_with_dvo_poses_has_few_false_positives() {
     ) else {
         return;
     };
-    let rgb_files = list(&dir, "rgb.txt");
+    let sequence = TumSequence::load(&dir).unwrap();
     let intrinsics = PinholeIntrinsics::new(520.9, 521.0, 325.1, 249.7);
     let size = ImageSize::new(640, 480);
     let mut processor = Processor::new(size, intrinsics, ProcessorConfig::default()).unwrap();
-    let mut depth = Image::filled(size, 0.0f32);
     let mut fractions = Vec::new();
     let mut failures = 0;
-    for (t, path) in list(&dir, "depth.txt") {
-        let (_, rgb_path) = rgb_files.iter().min_by_key(|(rt, _)| rt.abs_diff(t)).unwrap();
-        let gray = load_gray(rgb_path);
-        load_depth(&path, &mut depth);
+    for pair in sequence.depth_with_nearest_color() {
+        let frame = sequence.decode(&pair).unwrap();
         let out = processor
             .process(&FrameInput {
-                timestamp_ns: t,
-                gray: &gray,
-                depth_m: &depth,
+                timestamp_ns: frame.depth_timestamp_ns,
+                gray: &frame.gray,
+                depth_m: &frame.depth_m,
                 world_from_marker: None,
                 ignore_in_previous: None,
             })

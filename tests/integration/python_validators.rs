@@ -10,8 +10,8 @@
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns: a panic is the failure report
 
-mod common;
-mod process_support;
+use crate::common;
+use crate::common::mcap_fixture as process_support;
 
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};

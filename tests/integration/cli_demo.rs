@@ -2,7 +2,7 @@
 //! convert channels plus every channel `occmask process` adds; no temporary file left behind.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::process::Command;
@@ -66,7 +66,7 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         per_topic.get("/occmask/path").is_some_and(|&n| n > 0),
         "{per_topic:?}"
     );
-    // Real MCAP clients, when `bash .ci/run` provides them (see tests/python_validators.rs).
+    // Real MCAP clients, when `bash .ci/run` provides them (see tests/integration/python_validators.rs).
     if let Some(python) = std::env::var_os("OCCMASK_PYTHON").map(std::path::PathBuf::from) {
         let cli = python.with_file_name("pymcap-cli");
         let doctor = Command::new(&cli)

@@ -1,12 +1,17 @@
-//! Helpers shared by the integration tests: run the binary, build dataset folders.
-#![allow(dead_code)] // each test crate uses a different subset
+//! Helpers shared by the integration tests: run the binary, build dataset folders, find the
+//! real data ([`data`]), build in-memory MCAP recordings ([`mcap_fixture`]), read MCAP files
+//! back ([`recording`]), read TUM sequences through the library's dataset reader ([`tum`]).
+#![allow(dead_code)] // not every helper is used by a test in every configuration
 #![allow(clippy::unwrap_used)] // test helpers: a panic is the failure report
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-mod data;
-#[allow(unused_imports)] // not every test crate uses the data helpers
+pub mod data;
+pub mod mcap_fixture;
+pub mod recording;
+pub mod tum;
+
 pub use data::*;
 
 /// The repository root.

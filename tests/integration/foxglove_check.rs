@@ -4,7 +4,7 @@
 //! `@foxglove/schemas`, and checks what each panel of foxglove/occmask-layout.json needs
 //! (image sizes and encodings, annotation stamps and points, the transform tree, pose frames,
 //! the depth colour-map range, the plotted fields, the timeline Foxglove derives from the chunk
-//! indexes). The Python validators (tests/python_validators.rs) check MCAP conformance and
+//! indexes). The Python validators (tests/integration/python_validators.rs) check MCAP conformance and
 //! decoding with the file's own schemas; this checks what Foxglove shows.
 //!
 //! Needs `node` and `npm ci --prefix tools/foxglove_check` (`.ci/run` does it). Without them the
@@ -12,7 +12,7 @@
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns: a panic is the failure report
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

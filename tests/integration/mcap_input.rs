@@ -1,0 +1,92 @@
+//! `McapInput` reads the same recording the same way from a path, from bytes in memory and from
+//! any seekable reader: channels, every message (header and bytes), metadata and attachments,
+//! and where a truncated recording was cut.
+#![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
+
+use std::io::Cursor;
+use std::path::Path;
+
+use occmask::mcap_io::input::{ExtraRecord, McapInput, RawMessage};
+
+use crate::common::mcap_fixture::{fixture_bytes, FixtureSpec, ALL_FLAVORS};
+
+/// Everything a reader reports about its input.
+#[derive(Debug, PartialEq)]
+struct Seen {
+    indexed: bool,
+    truncated_at: Option<u64>,
+    channels: Vec<(u16, String, String)>,
+    messages: Vec<RawMessage>,
+    extras: Vec<ExtraRecord>,
+}
+
+fn seen(input: &McapInput) -> Seen {
+    let mut messages = Vec::new();
+    input
+        .for_each_message(None, None, |m| {
+            messages.push(m);
+            Ok(true)
+        })
+        .unwrap();
+    Seen {
+        indexed: input.is_indexed(),
+        truncated_at: input.truncation().map(|t| t.intact_bytes),
+        channels: input
+            .channels()
+            .values()
+            .map(|c| (c.id, c.topic.clone(), c.schema_name.clone()))
+            .collect(),
+        messages,
+        extras: input.extras().unwrap(),
+    }
+}
+
+/// The three ways in agree on `bytes`; returns what they saw.
+fn agree(bytes: &[u8], dir: &Path) -> Seen {
+    let path = dir.join("input.mcap");
+    std::fs::write(&path, bytes).unwrap();
+    let from_path = seen(&McapInput::open(&path).unwrap());
+    let from_bytes = seen(&McapInput::from_bytes(bytes, Path::new("in memory")).unwrap());
+    let from_reader = seen(&McapInput::from_reader(std::fs::File::open(&path).unwrap(), &path).unwrap());
+    assert_eq!(from_bytes, from_path);
+    assert_eq!(from_reader, from_path);
+    from_path
+}
+
+#[test]
+fn path_bytes_and_reader_read_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    for flavor in ALL_FLAVORS {
+        for indexed in [true, false] {
+            let spec = FixtureSpec {
+                indexed,
+                ..FixtureSpec::default()
+            };
+            let bytes = fixture_bytes(flavor, &spec);
+            let whole = agree(&bytes, dir.path());
+            assert!(!whole.messages.is_empty(), "{flavor:?}");
+            assert_eq!(whole.truncated_at, None, "{flavor:?}");
+            // Cut mid-way: read linearly up to the last complete record, the same way by all.
+            let cut = agree(&bytes[..bytes.len() / 2], dir.path());
+            assert!(!cut.indexed && cut.truncated_at.is_some(), "{flavor:?}");
+            assert!(cut.messages.len() < whole.messages.len(), "{flavor:?}");
+        }
+    }
+}
+
+#[test]
+fn errors_name_the_given_name() {
+    let err = McapInput::from_bytes(b"not an mcap file".to_vec(), Path::new("<recording>"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("<recording>") && err.contains("not an MCAP file"),
+        "{err}"
+    );
+    let err = McapInput::from_reader(Cursor::new(Vec::new()), Path::new("empty"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("empty"), "{err}");
+}
