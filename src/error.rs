@@ -109,8 +109,8 @@ pub enum Error {
         color_topic: String,
         /// How depth and colour differ.
         found: String,
-        /// What registering needs.
-        needed: RegistrationNeed,
+        /// What registering needs (boxed: it keeps the error small).
+        needed: Box<RegistrationNeed>,
     },
 
     /// No transform between the depth camera's and the colour camera's frames.

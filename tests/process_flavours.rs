@@ -895,10 +895,8 @@ mod geometry {
         assert!(
             matches!(
                 &err,
-                occmask::Error::DepthNotRegistered {
-                    needed: occmask::error::RegistrationNeed::DepthCalibration,
-                    ..
-                }
+                occmask::Error::DepthNotRegistered { needed, .. }
+                    if **needed == occmask::error::RegistrationNeed::DepthCalibration
             ),
             "{err}"
         );

@@ -338,8 +338,6 @@ impl FrameLoop {
     }
 }
 
-/// The per-sequence pipeline (DVO + detector: [`crate::pipeline::Processor`] in the causal
-
 /// The `/occmask/stats` message of one frame.
 fn stats_message(
     frame_index: u64,

@@ -70,8 +70,18 @@ use rectify::{plan_geometry, Rectifier};
 use streams::{first_calibration, first_image_info, missing_calibration, ImageDecoder};
 use threads::{write_ops, BufferPool, OutputQueue, Prefetched, WriteOp};
 
-/// [`Error::Decode`] for undecodable or unsupported messages; [`Error::SizeMismatch`] when
-/// colour and depth (or the calibration) differ in size; I/O and MCAP errors.
+/// Processes one input file into `sink`; see the module documentation. The pose source, DVO,
+/// detector and failure parameters come from [`ProcessConfig::processor`]; `make_processor`
+/// builds the [`FrameProcessor`] once the image size is known ([`pipeline_factory`] for the
+/// pipeline).
+///
+/// # Errors
+/// [`Error::Dataset`] for missing channels; [`Error::MissingCalibration`],
+/// [`Error::CalibrationSize`], [`Error::BadDepthUnits`], [`Error::NoPoses`],
+/// [`Error::AnchorPoses`], [`Error::DepthNotRegistered`] and [`Error::MissingTransform`] for
+/// what the file lacks (the CLI names the flag that supplies it); [`Error::Decode`] for
+/// undecodable or unsupported messages; [`Error::SizeMismatch`] when colour and depth differ
+/// in size; I/O and MCAP errors.
 pub fn process_file<W: Write + Seek + Send>(
     input: &McapInput,
     sink: W,

@@ -175,7 +175,7 @@ pub fn plan_geometry(
         depth_topic: depth_topic.clone(),
         color_topic: color_topic.clone(),
         found,
-        needed,
+        needed: Box::new(needed),
     };
     let undistort_color = color_camera.distortion.is_some() && !options.no_undistort;
     let plan = |depth_geometry| InputGeometry {

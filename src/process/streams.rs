@@ -20,6 +20,7 @@ use super::rectify::plan_geometry;
 use super::rectify::{Rectifier, StreamInfo};
 use super::threads::BufferPool;
 
+/// Adds which message failed (log time and sequence number, as a player shows them) to a
 /// decode error, so the user can find the frame.
 pub(super) fn at_message(error: Error, header: &mcap::records::MessageHeader) -> Error {
     match error {
