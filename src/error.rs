@@ -2,6 +2,8 @@
 //!
 //! Every variant says what was expected and what was found. Variants that come from a
 //! user-supplied file carry its path (last in the message) and, for text files, the line.
+//! Messages do not name command-line flags: the CLI adds the flag that fixes an error from its
+//! variant (`src/cli/hints.rs`), so library users get the same facts without them.
 
 use std::path::PathBuf;
 
@@ -107,16 +109,13 @@ pub enum Error {
         color_topic: String,
         /// How depth and colour differ.
         found: String,
-        /// What registering needs and the flags that give it.
-        needed: String,
+        /// What registering needs (boxed: it keeps the error small).
+        needed: Box<RegistrationNeed>,
     },
 
     /// No transform between the depth camera's and the colour camera's frames.
     #[error(
-        "no transform from the depth frame {depth_frame:?} to the colour frame {color_frame:?} \
-         ({searched}); pass --depth-to-color X,Y,Z,QX,QY,QZ,QW (the depth camera's pose in the \
-         colour camera's frame: translation in metres, then the rotation quaternion), or \
-         --depth-aligned if the depth is already registered to colour"
+        "no transform from the depth frame {depth_frame:?} to the colour frame {color_frame:?} ({searched})"
     )]
     MissingTransform {
         /// The depth image's `frame_id`.
@@ -126,6 +125,87 @@ pub enum Error {
         /// Which channels were searched and which frames they hold.
         searched: String,
     },
+
+    /// The colour images have no camera calibration.
+    #[error("no camera calibration for {color_topic}: {reason} ({})", path.display())]
+    MissingCalibration {
+        /// The input file.
+        path: PathBuf,
+        /// The colour topic.
+        color_topic: String,
+        /// Why none was found.
+        reason: CalibrationGap,
+    },
+
+    /// The colour calibration is for images of another size.
+    #[error(
+        "calibration vs colour {color_topic}: image size {calibration} does not match the expected {image}"
+    )]
+    CalibrationSize {
+        /// The colour topic.
+        color_topic: String,
+        /// The colour images' size.
+        image: ImageSize,
+        /// The calibration's size.
+        calibration: ImageSize,
+    },
+
+    /// The depth channel's metadata gives a depth scale that is not a positive number.
+    #[error("topic {topic}: channel metadata {key} = {value:?} is not a positive number")]
+    BadDepthUnits {
+        /// The depth topic.
+        topic: String,
+        /// The metadata key.
+        key: &'static str,
+        /// Its value.
+        value: String,
+    },
+
+    /// External poses were asked for without a topic to read them from.
+    #[error("external poses need a pose topic to read them from")]
+    MissingPoseTopic,
+
+    /// A pose channel holds no usable pose.
+    #[error(
+        "{role} {topic}: no poses{}{} ({})",
+        child_frame.as_ref().map(|c| format!(" with child frame {c}")).unwrap_or_default(),
+        if channels.is_empty() { String::new() } else { format!(" in the file (channels: {})", channels.join(", ")) },
+        path.display()
+    )]
+    NoPoses {
+        /// The input file.
+        path: PathBuf,
+        /// What the poses were for.
+        role: PoseRole,
+        /// The pose topic.
+        topic: String,
+        /// The child frame asked for, if any.
+        child_frame: Option<String>,
+        /// The file's channels, when the topic is missing altogether.
+        channels: Vec<String>,
+    },
+
+    /// The required anchor channel does not decode.
+    #[error("{error} (anchor poses)")]
+    AnchorPoses {
+        /// The anchor topic.
+        topic: String,
+        /// The decoding error.
+        error: Box<Error>,
+    },
+
+    /// The output exists and may not be overwritten.
+    #[error("output file {} exists{}", path.display(), if *appeared_while_writing { " (it appeared while writing)" } else { "" })]
+    OutputExists {
+        /// The output path.
+        path: PathBuf,
+        /// It was created by someone else while the output was being written.
+        appeared_while_writing: bool,
+    },
+
+    /// The output writer thread stopped (the error it stopped on is reported instead).
+    #[error("the output writer stopped")]
+    WriterStopped,
 
     /// The MCAP library reported an error.
     #[error("MCAP: {0}")]
@@ -159,4 +239,61 @@ impl Error {
             os_error: source,
         }
     }
+}
+
+/// Why no camera calibration was found ([`Error::MissingCalibration`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CalibrationGap {
+    /// The file has no calibration channel.
+    #[error("the file has no CameraCalibration/CameraInfo channel")]
+    NoChannel,
+    /// The calibration channel has no messages.
+    #[error("{topic} has no messages")]
+    NoMessages {
+        /// The calibration topic.
+        topic: String,
+    },
+    /// The calibration channel's schema is not supported.
+    #[error("unsupported schema")]
+    UnsupportedSchema {
+        /// The calibration topic.
+        topic: String,
+    },
+}
+
+/// What registering depth to colour needs ([`Error::DepthNotRegistered`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RegistrationNeed {
+    /// Depth was said to be registered (`reason`), but has another size than colour.
+    #[error(
+        "{reason} says the depth is registered to colour, but registered depth has the colour image's size"
+    )]
+    AlignedSameSize {
+        /// What said so (the option, or the topic name).
+        reason: String,
+    },
+    /// The depth camera's calibration is missing.
+    #[error("registering it needs the depth camera's calibration")]
+    DepthCalibration,
+    /// The depth calibration is for images of another size.
+    #[error("the depth calibration {topic} is for {calibration} images but the depth images are {image}")]
+    DepthCalibrationSize {
+        /// The depth calibration topic.
+        topic: String,
+        /// Its image size.
+        calibration: ImageSize,
+        /// The depth images' size.
+        image: ImageSize,
+    },
+}
+
+/// What a pose channel was read for ([`Error::NoPoses`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum PoseRole {
+    /// The external pose source.
+    #[error("pose topic")]
+    External,
+    /// The odometry anchor.
+    #[error("anchor topic")]
+    Anchor,
 }

@@ -8,6 +8,47 @@
 //! 3. I/O adapters: dataset readers, MCAP reading and writing;
 //! 4. the per-sequence pipeline, and its scoring on synthetic scenarios ([`scenario_eval`]);
 //! 5. the command-line interface (in the binary).
+//!
+//! # Embedding
+//!
+//! The entry types are re-exported here: a per-sequence [`Processor`] (configured by
+//! [`ProcessorConfig`]: pose source, [`DvoTracker`] and [`OcclusionDetector`] parameters) for
+//! frames you already have in memory (see [`pipeline`]); [`process_file`] for an RGB-D MCAP
+//! file read through [`McapInput`]; [`convert_sequence`] for a dataset folder read by
+//! [`dataset::tum::load`] or [`dataset::larr::load`]; [`evaluate`] to score an annotated file.
+//! A whole round trip on a tiny synthetic recording:
+//!
+//! ```
+//! use occmask::image_buf::ImageSize;
+//! use occmask::mcap_io::McapWriteOptions;
+//! use occmask::process::{pipeline_factory, NoHooks, PipelineOptions};
+//! use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
+//! use occmask::{evaluate, process_file, McapInput, ProcessConfig};
+//!
+//! let dir = tempfile::tempdir().unwrap();
+//! let (input_path, output_path) = (dir.path().join("in.mcap"), dir.path().join("out.mcap"));
+//! let sequence = SyntheticSequence::new(
+//!     Scenario::SmallObjectCrossing,
+//!     SequenceConfig { size: ImageSize::new(80, 60), frame_count: Some(4), ..SequenceConfig::default() },
+//! );
+//! let file = std::fs::File::create(&input_path).unwrap();
+//! occmask::convert::write_synthetic_sequence(&sequence, file, &McapWriteOptions::default(), &mut |_| {
+//!     std::ops::ControlFlow::Continue(())
+//! })?;
+//!
+//! let input = McapInput::open(&input_path)?;
+//! let (_, report) = process_file(
+//!     &input,
+//!     std::fs::File::create(&output_path).unwrap(),
+//!     &ProcessConfig::default(),
+//!     &mut pipeline_factory(PipelineOptions::default()),
+//!     &mut NoHooks,
+//! )?;
+//! assert_eq!(report.frames, 4);
+//! let scores = evaluate(&output_path)?;
+//! assert_eq!(scores.estimated_masks, 4);
+//! # Ok::<(), occmask::Error>(())
+//! ```
 #![deny(missing_docs)]
 
 pub mod contour;
@@ -31,4 +72,12 @@ pub mod synthetic;
 pub mod time;
 pub mod trajectory;
 
+pub use convert::{convert_sequence, ConvertConfig, ConvertReport};
+pub use dataset::{DatasetKind, Sequence};
+pub use dvo::{DvoConfig, DvoTracker};
 pub use error::{Error, Result};
+pub use evaluate::{evaluate, EvalReport};
+pub use mcap_io::input::McapInput;
+pub use occlusion::{OcclusionConfig, OcclusionDetector};
+pub use pipeline::{FrameInput, FrameOutput, FrameResult, PoseSource, Processor, ProcessorConfig};
+pub use process::{process_file, ProcessConfig, ProcessReport};

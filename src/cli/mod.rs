@@ -7,6 +7,7 @@
 pub mod convert;
 pub mod demo;
 pub mod eval;
+pub mod hints;
 pub mod options;
 pub mod process;
 pub mod signals;
@@ -87,6 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<Outcome> {
         Command::Eval(a) => eval::run(a, &globals),
         Command::Demo(a) => demo::run(a, &globals),
     }
+    .map_err(hints::with_hint)
 }
 
 /// The command line as one string (arguments with spaces or quotes are single-quoted), for

@@ -17,11 +17,11 @@ use occmask::mcap_io::input::detect::TopicOverrides;
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::AtomicOutput;
 use occmask::occlusion::AppearanceGrowthConfig;
-use occmask::pipeline::{ProcessingMode, ProcessorConfig};
+use occmask::pipeline::{PoseSource, ProcessingMode, ProcessorConfig};
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::rectify::GeometryOptions;
 use occmask::process::{
-    process_file, OdometryAnchor, PipelineOptions, PoseMode, ProcessConfig, ProcessHooks, ProcessReport,
+    process_file, OdometryAnchor, PipelineOptions, ProcessConfig, ProcessHooks, ProcessReport,
     DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
 };
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
@@ -301,10 +301,12 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
         .map(dataset::parse_camera)
         .transpose()
         .context("--camera")?;
-    let pose_mode = match (&args.pose_topic, args.pose) {
-        (Some(_), _) => PoseMode::External,
-        (None, PoseArg::Dvo) => PoseMode::Dvo,
-        (None, PoseArg::DvoUnmasked) => PoseMode::DvoUnmasked,
+    let pose_source = match (&args.pose_topic, args.pose) {
+        (Some(_), _) => PoseSource::External {
+            camera_from_marker: args.camera_from_marker,
+        },
+        (None, PoseArg::Dvo) => PoseSource::DvoClosedLoop,
+        (None, PoseArg::DvoUnmasked) => PoseSource::DvoUnmasked,
     };
     if let (Some(s), Some(e)) = (args.start, args.end) {
         if e <= s {
@@ -325,6 +327,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
         }
         None => ProcessorConfig::default(),
     };
+    processor.pose_source = pose_source;
     if args.appearance_growth {
         processor
             .occlusion
@@ -356,7 +359,6 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
             no_undistort: args.no_undistort,
         },
         depth_units_per_meter: args.depth_units_per_meter,
-        pose_mode,
         pose_child_frame: args.pose_frame.clone(),
         pair_tolerance_ns: (args.max_pair_gap_ms * 1e6).round() as u64,
         max_pose_gap_ns: DEFAULT_MAX_POSE_GAP_NS,
@@ -496,7 +498,6 @@ fn run_one(
     }
     let mut factory = occmask::process::pipeline_factory(PipelineOptions {
         keep_accumulation: args.accumulation,
-        camera_from_marker: args.camera_from_marker,
     });
     let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
         .with_context(|| {
@@ -586,7 +587,7 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         let start = Instant::now();
         let outcome = run_one(job, &args, &config, &all_inputs, bar, &total)
             .map(|r| (r, start.elapsed().as_secs_f64()))
-            .map_err(|e| format!("{e:#}"));
+            .map_err(|e| format!("{:#}", super::hints::with_hint(e)));
         match &outcome {
             Ok(_) => bar.finish_with_message("done"),
             Err(_) => bar.abandon_with_message("FAILED"),

@@ -46,8 +46,8 @@ impl AtomicOutput {
     /// Creates the temporary file `<final>.<pid>.tmp` in the target's directory.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] when `final_path` is a directory, is one of `inputs`, or
-    /// exists and `force` is false; [`Error::Io`] when the temporary file cannot be created
+    /// [`Error::InvalidParameter`] when `final_path` is a directory or is one of `inputs`;
+    /// [`Error::OutputExists`] when it exists and `force` is false; [`Error::Io`] when the temporary file cannot be created
     /// (e.g. the directory does not exist).
     pub fn create(final_path: &Path, force: bool, inputs: &[&Path]) -> Result<(Self, File)> {
         if final_path.is_dir() {
@@ -73,10 +73,10 @@ impl AtomicOutput {
             }
         }
         if final_path.exists() && !force {
-            return Err(output_error(
-                final_path,
-                "a path that does not exist yet (pass --force to overwrite it)",
-            ));
+            return Err(Error::OutputExists {
+                path: final_path.to_owned(),
+                appeared_while_writing: false,
+            });
         }
         let file_name = final_path
             .file_name()
@@ -114,17 +114,17 @@ impl AtomicOutput {
     /// Flushes `file` to disk and renames the temporary file to the final path.
     ///
     /// # Errors
-    /// [`Error::Io`] when syncing or renaming fails; [`Error::InvalidParameter`] when the
+    /// [`Error::Io`] when syncing or renaming fails; [`Error::OutputExists`] when the
     /// target appeared meanwhile and `force` is false. The temporary file is removed.
     pub fn commit(mut self, file: File) -> Result<()> {
         file.sync_all()
             .map_err(|e| Error::io("cannot flush output file", &self.temp_path, e))?;
         drop(file);
         if !self.force && self.final_path.exists() {
-            return Err(output_error(
-                &self.final_path,
-                "a path that does not exist yet (it appeared while writing; pass --force to overwrite it)",
-            ));
+            return Err(Error::OutputExists {
+                path: self.final_path.clone(),
+                appeared_while_writing: true,
+            });
         }
         std::fs::rename(&self.temp_path, &self.final_path)
             .map_err(|e| Error::io("cannot rename temporary output into place", &self.final_path, e))?;
@@ -169,8 +169,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("a.mcap");
         std::fs::write(&out, b"old").unwrap();
-        let err = AtomicOutput::create(&out, false, &[]).unwrap_err().to_string();
-        assert!(err.contains("--force"), "{err}");
+        let err = AtomicOutput::create(&out, false, &[]).unwrap_err();
+        assert!(
+            matches!(&err, Error::OutputExists { path, appeared_while_writing: false } if *path == out),
+            "{err}"
+        );
         let err = AtomicOutput::create(&out, true, &[out.as_path()])
             .unwrap_err()
             .to_string();

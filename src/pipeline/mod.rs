@@ -111,6 +111,23 @@ pub enum PoseSource {
     },
 }
 
+impl PoseSource {
+    /// The name on the command line (`--pose`), in `/occmask/stats` and in the `occmask.process`
+    /// metadata: `dvo`, `dvo-unmasked` or `external`.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            PoseSource::DvoClosedLoop => "dvo",
+            PoseSource::DvoUnmasked => "dvo-unmasked",
+            PoseSource::External { .. } => "external",
+        }
+    }
+
+    /// Whether the poses come with the frames (no DVO runs).
+    pub fn is_external(&self) -> bool {
+        matches!(self, PoseSource::External { .. })
+    }
+}
+
 /// Below this fraction of pixels with valid depth a frame is treated as a sensor blackout:
 /// neither DVO nor the detector sees it. 2 % of 640×480 is 6 100 pixels, six times DVO's
 /// default `min_usable_pixels` (1 000 at the finest level), so a frame that passes can still
@@ -521,6 +538,33 @@ pub struct FrameOutput<'a> {
     pub accumulation_m: &'a DepthMeters,
     /// Statistics.
     pub stats: FrameStats,
+}
+
+/// A [`FrameOutput`] that owns its images, for callers that keep results beyond the next frame
+/// (a processor that looks ahead returns them a block at a time; `occmask process` hands them to
+/// its writer thread).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameResult {
+    /// Moving-object mask (255 = moving; empty on frames without depth).
+    pub mask: Mask,
+    /// Camera pose ([`FrameOutput::world_from_camera`]).
+    pub world_from_camera: Isometry3<f64>,
+    /// The accumulation map A (m), when the caller asked to keep it.
+    pub accumulation_m: Option<DepthMeters>,
+    /// Statistics.
+    pub stats: FrameStats,
+}
+
+impl FrameOutput<'_> {
+    /// The owned result, with a copy of the accumulation map if `keep_accumulation`.
+    pub fn to_result(&self, keep_accumulation: bool) -> FrameResult {
+        FrameResult {
+            mask: self.mask.clone(),
+            world_from_camera: self.world_from_camera,
+            accumulation_m: keep_accumulation.then(|| self.accumulation_m.clone()),
+            stats: self.stats,
+        }
+    }
 }
 
 enum MotionSource {

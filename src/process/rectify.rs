@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use nalgebra::Isometry3;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, RegistrationNeed, Result};
 use crate::geometry::distortion::{CameraModel, LensDistortion};
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize};
 use crate::mcap_io::input::decode::CalibrationMsg;
@@ -171,11 +171,11 @@ pub fn plan_geometry(
     options: &GeometryOptions,
 ) -> Result<InputGeometry> {
     let (color_topic, depth_topic) = (&topics.color.topic, &topics.depth.topic);
-    let not_registered = |found: String, needed: String| Error::DepthNotRegistered {
+    let not_registered = |found: String, needed: RegistrationNeed| Error::DepthNotRegistered {
         depth_topic: depth_topic.clone(),
         color_topic: color_topic.clone(),
         found,
-        needed,
+        needed: Box::new(needed),
     };
     let undistort_color = color_camera.distortion.is_some() && !options.no_undistort;
     let plan = |depth_geometry| InputGeometry {
@@ -194,11 +194,7 @@ pub fn plan_geometry(
         if depth.size != color.size {
             return Err(not_registered(
                 format!("depth {} vs colour {}", depth.size, color.size),
-                format!(
-                    "{reason} says the depth is registered to colour, but registered depth has the \
-                     colour image's size; pass --depth-camera-info-topic TOPIC with the depth \
-                     camera's calibration to register it"
-                ),
+                RegistrationNeed::AlignedSameSize { reason },
             ));
         }
         Ok(plan(DepthGeometry::Aligned { reason }))
@@ -252,12 +248,7 @@ pub fn plan_geometry(
     }
     let found = differences.join(", ");
     let Some(depth_camera) = depth_file_camera else {
-        return Err(not_registered(
-            found,
-            "registering it needs the depth camera's calibration: pass --depth-camera-info-topic \
-             TOPIC, or --depth-aligned if the depth is already registered to colour"
-                .into(),
-        ));
+        return Err(not_registered(found, RegistrationNeed::DepthCalibration));
     };
     let mut depth_camera = depth_camera?;
     if depth_camera.size.area() == 0 {
@@ -266,11 +257,11 @@ pub fn plan_geometry(
     if depth_camera.size != depth.size {
         return Err(not_registered(
             found,
-            format!(
-                "the depth calibration {depth_calibration_topic} is for {} images but the depth images \
-                 are {}; pass --depth-camera-info-topic with the calibration of these images",
-                depth_camera.size, depth.size
-            ),
+            RegistrationNeed::DepthCalibrationSize {
+                topic: depth_calibration_topic.clone(),
+                calibration: depth_camera.size,
+                image: depth.size,
+            },
         ));
     }
     let (color_from_depth, transform_source) = if let Some(pose) = options.color_from_depth {

@@ -14,8 +14,9 @@ use occmask::convert::{convert_sequence, resolve_intrinsics, ConvertConfig, DEFA
 use occmask::dataset::{self, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS};
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::McapWriteOptions;
+use occmask::pipeline::{PoseSource, ProcessorConfig};
 use occmask::process::batch::{run_batch, ThreadBudget};
-use occmask::process::{pipeline_factory, process_file, NoHooks, PipelineOptions, PoseMode, ProcessConfig};
+use occmask::process::{pipeline_factory, process_file, NoHooks, PipelineOptions, ProcessConfig};
 
 fn desk_mcap(dir: &Path) -> PathBuf {
     let seq = dataset::tum::load(&data::tum_fixture(), DatasetKind::Tum).unwrap();
@@ -37,10 +38,13 @@ fn desk_mcap(dir: &Path) -> PathBuf {
     path
 }
 
-fn process(path: &Path, mode: PoseMode) -> (Vec<u8>, u64) {
+fn process(path: &Path, mode: PoseSource) -> (Vec<u8>, u64) {
     let input = McapInput::open(path).unwrap();
     let config = ProcessConfig {
-        pose_mode: mode,
+        processor: ProcessorConfig {
+            pose_source: mode,
+            ..ProcessorConfig::default()
+        },
         ..ProcessConfig::default()
     };
     let (cursor, report) = process_file(
@@ -58,7 +62,7 @@ fn process(path: &Path, mode: PoseMode) -> (Vec<u8>, u64) {
 fn files_processed_concurrently_in_their_own_pools_match_sequential_one_thread_runs() {
     let dir = tempfile::tempdir().unwrap();
     let path = desk_mcap(dir.path());
-    let modes = [PoseMode::Dvo, PoseMode::DvoUnmasked];
+    let modes = [PoseSource::DvoClosedLoop, PoseSource::DvoUnmasked];
     // The sequential reference: one file at a time on one thread.
     let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     let reference: Vec<(Vec<u8>, u64)> = modes

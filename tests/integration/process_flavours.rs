@@ -18,7 +18,7 @@ use occmask::mcap_io::annotate::{
     TOPIC_ODOMETRY, TOPIC_PATH, TOPIC_STATS, TOPIC_TF_FALLBACK,
 };
 use occmask::mcap_io::input::McapInput;
-use occmask::process::{process_file, NoHooks, PoseMode, ProcessConfig, ProcessReport};
+use occmask::process::{process_file, NoHooks, ProcessConfig, ProcessReport};
 use process_support::*;
 
 fn write_input(dir: &Path, flavor: Flavor, spec: &FixtureSpec) -> std::path::PathBuf {
@@ -323,7 +323,12 @@ fn external_poses_are_interpolated_to_frame_times() {
     for flavor in ALL_FLAVORS {
         let path = write_input(dir.path(), flavor, &FixtureSpec::default());
         let config = ProcessConfig {
-            pose_mode: PoseMode::External,
+            processor: occmask::pipeline::ProcessorConfig {
+                pose_source: occmask::pipeline::PoseSource::External {
+                    camera_from_marker: None,
+                },
+                ..Default::default()
+            },
             topics: occmask::mcap_io::input::detect::TopicOverrides {
                 pose: Some(GT_TOPIC.into()),
                 ..Default::default()
@@ -385,14 +390,17 @@ fn errors_name_what_to_fix() {
         "{err}"
     );
 
-    // Missing calibration: names --camera.
+    // Missing calibration: names the colour topic (the CLI adds --camera).
     let spec = FixtureSpec {
         with_calibration: false,
         ..Default::default()
     };
     let path = write_input(dir.path(), Flavor::Protobuf, &spec);
-    let err = run(&path, &ProcessConfig::default()).unwrap_err().to_string();
-    assert!(err.contains("--camera") && err.contains(COLOR_TOPIC), "{err}");
+    let err = run(&path, &ProcessConfig::default()).unwrap_err();
+    assert!(
+        matches!(&err, occmask::Error::MissingCalibration { color_topic, .. } if color_topic == COLOR_TOPIC),
+        "{err}"
+    );
     let config = ProcessConfig {
         intrinsics: Some(INTRINSICS),
         ..Default::default()
@@ -554,10 +562,9 @@ mod geometry {
     use occmask::mcap_io::input::McapInput;
     use occmask::mcap_io::ros_out::RosVersion;
     use occmask::mcap_io::McapWriteOptions;
+    use occmask::pipeline::{FrameInput, FrameResult, FrameStats, PoseOutcome};
     use occmask::process::rectify::GeometryOptions;
-    use occmask::process::{
-        process_file, FrameProcessor, NoHooks, ProcessConfig, ProcessReport, ProcessedFrame, RgbdFrame,
-    };
+    use occmask::process::{process_file, FrameProcessor, NoHooks, ProcessConfig, ProcessReport};
     use occmask::synthetic::{
         DepthSensorModel, RgbdRig, Scenario, SequenceConfig, SyntheticFrame, SyntheticSequence,
     };
@@ -617,20 +624,20 @@ mod geometry {
     struct Capture(Seen);
 
     impl FrameProcessor for Capture {
-        fn push(&mut self, frame: &RgbdFrame<'_>) -> occmask::Result<Vec<ProcessedFrame>> {
+        fn push(&mut self, frame: &FrameInput<'_>) -> occmask::Result<Vec<FrameResult>> {
             self.0
                 .lock()
                 .unwrap()
                 .push((frame.gray.clone(), frame.depth_m.clone()));
             let size = frame.gray.size();
-            Ok(vec![ProcessedFrame {
+            Ok(vec![FrameResult {
                 mask: Mask::from_fn(size, |x, _| if x >= size.width * 3 / 4 { MASK_SET } else { 0 }),
                 world_from_camera: nalgebra::Isometry3::identity(),
-                accumulation: None,
-                dvo_status: "converged".into(),
-                dvo_iterations: 0,
-                dvo_cost: 0.0,
-                health: Default::default(),
+                accumulation_m: None,
+                stats: FrameStats {
+                    outcome: PoseOutcome::Tracked,
+                    ..FrameStats::default()
+                },
             }])
         }
     }
@@ -640,7 +647,7 @@ mod geometry {
         let seen: Seen = Arc::default();
         let capture = Arc::clone(&seen);
         let mut factory =
-            move |_, _, _, _: &_| Ok(Box::new(Capture(Arc::clone(&capture))) as Box<dyn FrameProcessor>);
+            move |_, _, _: &_| Ok(Box::new(Capture(Arc::clone(&capture))) as Box<dyn FrameProcessor>);
         let (out, report) = process_file(
             &input,
             std::io::Cursor::new(Vec::new()),
@@ -860,11 +867,12 @@ mod geometry {
         let path = recording(dir.path(), "rs.mcap", &rig, RosVersion::Ros2);
 
         let no_tf = without(dir.path(), &path, &[rig_names::TF_STATIC]);
-        let err = run(&no_tf, &ProcessConfig::default()).unwrap_err().to_string();
+        let err = run(&no_tf, &ProcessConfig::default()).unwrap_err();
+        assert!(matches!(err, occmask::Error::MissingTransform { .. }), "{err}");
+        let err = err.to_string();
         assert!(
             err.contains(rig_names::DEPTH_FRAME)
                 && err.contains(rig_names::COLOR_FRAME)
-                && err.contains("--depth-to-color")
                 && err.contains("no transform channel"),
             "{err}"
         );
@@ -882,13 +890,18 @@ mod geometry {
         assert!(good > 0.99, "{good}");
 
         let no_depth_info = without(dir.path(), &path, &[rig_names::DEPTH_INFO, rig_names::TF_STATIC]);
-        let err = run(&no_depth_info, &ProcessConfig::default())
-            .unwrap_err()
-            .to_string();
+        let err = run(&no_depth_info, &ProcessConfig::default()).unwrap_err();
         assert!(
-            err.contains(rig_names::DEPTH_IMAGE)
-                && err.contains("--depth-camera-info-topic")
-                && err.contains("212x120"),
+            matches!(
+                &err,
+                occmask::Error::DepthNotRegistered { needed, .. }
+                    if **needed == occmask::error::RegistrationNeed::DepthCalibration
+            ),
+            "{err}"
+        );
+        let err = err.to_string();
+        assert!(
+            err.contains(rig_names::DEPTH_IMAGE) && err.contains("212x120"),
             "{err}"
         );
 

@@ -17,7 +17,8 @@ use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Mask, MASK_SET};
 use occmask::mcap_io::codec;
 use occmask::mcap_io::input::{json, ros1, ros2};
 use occmask::mcap_io::ros_out::{self, RosImage, RosVersion};
-use occmask::process::{FrameProcessor, PoseMode, ProcessedFrame, RgbdFrame};
+use occmask::pipeline::{DvoSummary, FrameInput, FrameResult, FrameStats, PoseOutcome};
+use occmask::process::FrameProcessor;
 use occmask::Result;
 use prost::Message as _;
 
@@ -553,13 +554,13 @@ pub struct TestProcessor {
 }
 
 impl FrameProcessor for TestProcessor {
-    fn push(&mut self, frame: &RgbdFrame<'_>) -> Result<Vec<ProcessedFrame>> {
+    fn push(&mut self, frame: &FrameInput<'_>) -> Result<Vec<FrameResult>> {
         self.process(frame).map(|result| vec![result])
     }
 }
 
 impl TestProcessor {
-    fn process(&mut self, frame: &RgbdFrame<'_>) -> Result<ProcessedFrame> {
+    fn process(&mut self, frame: &FrameInput<'_>) -> Result<FrameResult> {
         let size = frame.gray.size();
         let mask = match &self.previous {
             Some(prev) => Mask::from_fn(size, |x, y| {
@@ -573,7 +574,7 @@ impl TestProcessor {
             None => Mask::filled(size, 0),
         };
         let mean = |v: &[f32]| v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64;
-        let pose = frame.world_from_camera.unwrap_or_else(|| {
+        let pose = frame.world_from_marker.copied().unwrap_or_else(|| {
             Isometry3::translation(
                 mean(frame.gray.as_slice()),
                 mean(frame.depth_m.as_slice()),
@@ -582,18 +583,27 @@ impl TestProcessor {
         });
         self.previous = Some(frame.gray.clone());
         self.count += 1;
-        Ok(ProcessedFrame {
+        let mut iterations_per_level = [0; occmask::dvo::MAX_DVO_LEVELS];
+        iterations_per_level[0] = self.count;
+        Ok(FrameResult {
             mask,
             world_from_camera: pose,
-            accumulation: Some(occmask::image_buf::Image::filled(size, self.count as f32)),
-            dvo_status: if frame.world_from_camera.is_some() {
-                "external".into()
-            } else {
-                "converged".into()
+            accumulation_m: Some(occmask::image_buf::Image::filled(size, self.count as f32)),
+            stats: FrameStats {
+                outcome: if frame.world_from_marker.is_some() {
+                    PoseOutcome::External
+                } else {
+                    PoseOutcome::Tracked
+                },
+                dvo: Some(DvoSummary {
+                    status: occmask::dvo::DvoStatus::Converged,
+                    iterations_per_level,
+                    final_cost: 0.5,
+                    pixels_used: 0,
+                    reference_pixels: 0,
+                }),
+                ..FrameStats::default()
             },
-            dvo_iterations: self.count,
-            dvo_cost: 0.5,
-            health: occmask::process::FrameHealth::default(),
         })
     }
 }
@@ -602,7 +612,6 @@ impl TestProcessor {
 pub fn test_factory(
     intrinsics: PinholeIntrinsics,
     _size: ImageSize,
-    _mode: PoseMode,
     _config: &occmask::pipeline::ProcessorConfig,
 ) -> Result<Box<dyn FrameProcessor>> {
     Ok(Box::new(TestProcessor {

@@ -1,0 +1,78 @@
+//! The command-line flag that fixes a library error. The library's messages state what was
+//! expected and found without naming flags; the CLI appends the flag from the error's variant.
+
+use occmask::error::{PoseRole, RegistrationNeed};
+use occmask::Error;
+
+/// What to pass (or check) on the command line for `error`, if a flag fixes it.
+pub fn flag_hint(error: &Error) -> Option<&'static str> {
+    Some(match error {
+        Error::MissingCalibration { .. } => {
+            "pass --camera FX,FY,CX,CY (or a preset such as fr2) or --camera-info-topic TOPIC"
+        }
+        Error::CalibrationSize { .. } => "pass --camera FX,FY,CX,CY for the image size",
+        Error::BadDepthUnits { .. } => "pass --depth-units-per-meter",
+        Error::MissingPoseTopic => "pass --pose-topic",
+        Error::NoPoses {
+            role: PoseRole::External,
+            ..
+        } => "check --pose-topic and --pose-frame",
+        Error::NoPoses {
+            role: PoseRole::Anchor,
+            ..
+        } => "check --anchor-topic, or pass --no-anchor",
+        Error::AnchorPoses { .. } => "pass --no-anchor to ignore the channel",
+        Error::OutputExists { .. } => "pass --force to overwrite it",
+        Error::DepthNotRegistered { needed, .. } => match needed.as_ref() {
+            RegistrationNeed::AlignedSameSize { .. } => {
+                "pass --depth-camera-info-topic TOPIC with the depth camera's calibration to register it"
+            }
+            RegistrationNeed::DepthCalibration => {
+                "pass --depth-camera-info-topic TOPIC, or --depth-aligned if the depth is already \
+                 registered to colour"
+            }
+            RegistrationNeed::DepthCalibrationSize { .. } => {
+                "pass --depth-camera-info-topic with the calibration of these images"
+            }
+        },
+        Error::MissingTransform { .. } => {
+            "pass --depth-to-color X,Y,Z,QX,QY,QZ,QW (the depth camera's pose in the colour \
+             camera's frame: translation in metres, then the rotation quaternion), or \
+             --depth-aligned if the depth is already registered to colour"
+        }
+        _ => return None,
+    })
+}
+
+/// `error` with the flag that fixes it appended to its message (`error: … ; pass --…`), when
+/// the library error in its chain has one; else `error` unchanged.
+pub fn with_hint(error: anyhow::Error) -> anyhow::Error {
+    let hint = error
+        .chain()
+        .find_map(|e| e.downcast_ref::<Error>())
+        .and_then(flag_hint);
+    match hint {
+        Some(hint) => anyhow::anyhow!("{error:#}; {hint}"),
+        None => error,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use anyhow::Context;
+
+    #[test]
+    fn hints_follow_the_whole_chain_and_leave_other_errors_alone() {
+        let error = Err::<(), _>(Error::MissingPoseTopic)
+            .context("processing a.mcap")
+            .unwrap_err();
+        assert_eq!(
+            format!("{:#}", with_hint(error)),
+            "processing a.mcap: external poses need a pose topic to read them from; pass --pose-topic"
+        );
+        let error = anyhow::Error::new(Error::Interrupted { done: 1, total: 2 });
+        let kept = with_hint(error);
+        assert!(kept.downcast_ref::<Error>().is_some());
+    }
+}

@@ -1,0 +1,385 @@
+//! The frame loop of `occmask process` (the calling thread): pairs colour with depth, runs the
+//! [`FrameProcessor`], anchors the trajectory, and hands each frame's new messages and the
+//! copied input messages to the writer thread in log-time order.
+
+use std::collections::VecDeque;
+use std::sync::mpsc::Sender;
+use std::time::Instant;
+
+use nalgebra::Isometry3;
+
+use crate::error::{Error, Result};
+use crate::geometry::camera::PinholeIntrinsics;
+use crate::image_buf::{DepthMeters, GrayF32, ImageSize};
+use crate::mcap_io::annotate::{moving_pixels, FrameStatsMsg, JsonTime};
+use crate::mcap_io::input::detect::RgbdTopics;
+use crate::mcap_io::input::RawMessage;
+use crate::pipeline::{FrameInput, FrameResult, PoseSource};
+use crate::time::split_ns;
+use crate::trajectory::StampedPose;
+
+use super::adapter::{FrameProcessor, ProcessorFactory};
+#[cfg(doc)]
+use super::config::OdometryAnchor;
+use super::config::{ProcessConfig, ProcessHooks};
+use super::pairing::{Pairer, Pairing, Pixels, Queued};
+use super::poses::{anchor_at, FramePose, InputPoses, MAX_UNANCHORED_FRAMES};
+use super::rectify::Publisher;
+use super::report::{AnchorFrame, ProcessReport};
+use super::threads::{FrameWrite, OutputQueue, WriteOp};
+
+/// What the frame loop reads but does not change.
+pub(super) struct FrameContext<'a> {
+    pub(super) config: &'a ProcessConfig,
+    pub(super) topics: &'a RgbdTopics,
+    pub(super) intrinsics: PinholeIntrinsics,
+    pub(super) calibration_size: Option<ImageSize>,
+    pub(super) poses: &'a InputPoses,
+    /// [`OdometryAnchor`]: the channel and its poses, when the trajectory is anchored.
+    pub(super) anchor_poses: Option<(&'a str, &'a [StampedPose])>,
+}
+
+/// The frame loop's state.
+pub(super) struct FrameLoop {
+    pub(super) pairer: Pairer,
+    pub(super) pending: VecDeque<RawMessage>,
+    /// Frames given to the processor whose results have not come back yet (oldest first).
+    pub(super) in_flight: VecDeque<InFlight>,
+    /// Results waiting for the first frame the anchor channel covers (oldest first).
+    pub(super) unanchored: Vec<(InFlight, FrameResult)>,
+    pub(super) gray: GrayF32,
+    pub(super) depth_m: DepthMeters,
+    /// Maps masks back to the published colour pixels (the input side of the registration
+    /// and undistortion runs on the prefetch thread).
+    pub(super) publisher: Publisher,
+    pub(super) processor: Option<Box<dyn FrameProcessor>>,
+    /// Maps the processor's `world` (its first camera) into the output's `world`; set at the
+    /// first processed frame ([`OdometryAnchor`]).
+    pub(super) world_from_odometry: Option<Isometry3<f64>>,
+    pub(super) first_color_ns: Option<u64>,
+    pub(super) report: ProcessReport,
+    /// Returns processed image buffers to the prefetch thread.
+    pub(super) recycle: (Sender<GrayF32>, Sender<DepthMeters>),
+}
+
+/// What the frame loop keeps of a frame while the processor works on it.
+pub(super) struct InFlight {
+    log_time_ns: u64,
+    timestamp_ns: u64,
+    frame_id: String,
+    decode_ms: f64,
+    process_ms: f64,
+}
+
+impl FrameLoop {
+    /// Pairs what can be paired, processes the pairs, and copies input messages that can no
+    /// longer have new messages written before them.
+    pub(super) fn drain(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        make_processor: &mut ProcessorFactory<'_>,
+        hooks: &mut dyn ProcessHooks,
+        end_of_stream: bool,
+    ) -> Result<()> {
+        while let Some(p) = self.pairer.next(end_of_stream) {
+            match p {
+                Pairing::UnpairedColor => self.report.unpaired_color += 1,
+                Pairing::UnpairedDepth => self.report.unpaired_depth += 1,
+                Pairing::Pair(pair) => {
+                    let (c, d) = *pair;
+                    self.frame(ctx, output, make_processor, hooks, c, d)?
+                }
+            }
+        }
+        if end_of_stream {
+            if let Some(processor) = &mut self.processor {
+                let pipeline_start = Instant::now();
+                let results = processor.finish()?;
+                self.report.timings.pipeline_s += pipeline_start.elapsed().as_secs_f64();
+                for result in results {
+                    self.write_result(ctx, output, hooks, result)?;
+                }
+            }
+            if !self.unanchored.is_empty() {
+                self.give_up_anchor(ctx);
+                self.flush_unanchored(ctx, output, hooks)?;
+            }
+        }
+        // New messages are still to come for frames being paired or processed: input messages
+        // after the oldest of them wait.
+        let limit = if end_of_stream {
+            u64::MAX
+        } else {
+            let pairing = self.pairer.oldest_color_log_time().unwrap_or(u64::MAX);
+            let held = self.unanchored.first().map(|(f, _)| f.log_time_ns);
+            let processing = held
+                .or(self.in_flight.front().map(|f| f.log_time_ns))
+                .unwrap_or(u64::MAX);
+            pairing.min(processing)
+        };
+        while self.pending.front().is_some_and(|m| m.header.log_time <= limit) {
+            if let Some(m) = self.pending.pop_front() {
+                output.send(WriteOp::Copy(m))?;
+            }
+        }
+        Ok(())
+    }
+
+    fn frame(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        make_processor: &mut ProcessorFactory<'_>,
+        hooks: &mut dyn ProcessHooks,
+        color: Queued,
+        depth: Queued,
+    ) -> Result<()> {
+        let stamp = color.timestamp_ns;
+        let offset = stamp.saturating_sub(self.first_color_ns.unwrap_or(stamp));
+        let before_start = ctx.config.start_offset_ns.is_some_and(|s| offset < s);
+        let after_end = ctx.config.end_offset_ns.is_some_and(|e| offset >= e);
+        if before_start || after_end {
+            self.report.outside_time_range += 1;
+            return Ok(());
+        }
+        if self.report.last_timestamp_ns.is_some_and(|last| stamp <= last) {
+            self.report.out_of_order_frames += 1;
+            return Ok(());
+        }
+        let world_from_marker = match ctx.poses.at(stamp) {
+            FramePose::Estimated => None,
+            FramePose::Given(pose) => Some(pose),
+            FramePose::Outside => {
+                self.report.outside_pose_stream += 1;
+                return Ok(());
+            }
+        };
+        let decode_ms = color.decode_ms + depth.decode_ms;
+        let rectify_s = color.rectify_s + depth.rectify_s;
+        if let (Pixels::Gray(gray), Pixels::Depth(depth_m)) = (color.pixels, depth.pixels) {
+            // The receiver is gone once the prefetch thread has finished: nothing to recycle.
+            let _ = self.recycle.0.send(std::mem::replace(&mut self.gray, gray));
+            let _ = self.recycle.1.send(std::mem::replace(&mut self.depth_m, depth_m));
+        }
+        // The prefetch thread checked both sizes against the first images and rectified depth
+        // into the colour camera.
+        let size = self.gray.size();
+        if let Some(cal) = ctx.calibration_size.filter(|c| c.area() > 0 && *c != size) {
+            return Err(Error::CalibrationSize {
+                color_topic: ctx.topics.color.topic.clone(),
+                image: size,
+                calibration: cal,
+            });
+        }
+        let processor = match &mut self.processor {
+            Some(p) => p,
+            None => self
+                .processor
+                .insert(make_processor(ctx.intrinsics, size, &ctx.config.processor)?),
+        };
+        let pipeline_start = Instant::now();
+        let results = processor.push(&FrameInput {
+            timestamp_ns: stamp,
+            gray: &self.gray,
+            depth_m: &self.depth_m,
+            world_from_marker: world_from_marker.as_ref(),
+            ignore_in_previous: None,
+        })?;
+        let pipeline_s = pipeline_start.elapsed().as_secs_f64();
+        self.report.timings.pipeline_s += pipeline_s;
+        self.report.timings.rectify_s += rectify_s;
+        self.report.last_timestamp_ns = Some(stamp);
+        self.in_flight.push_back(InFlight {
+            log_time_ns: color.log_time_ns,
+            timestamp_ns: stamp,
+            frame_id: color.frame_id,
+            decode_ms,
+            // Measured always (the report), written only with --timings (output bytes).
+            process_ms: if ctx.config.timings { pipeline_s * 1e3 } else { 0.0 },
+        });
+        for result in results {
+            self.write_result(ctx, output, hooks, result)?;
+        }
+        Ok(())
+    }
+
+    /// Takes the oldest in-flight frame's result: written at once when the odometry's frame is
+    /// known, else held until the first frame the anchor channel covers.
+    fn write_result(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        hooks: &mut dyn ProcessHooks,
+        mut result: FrameResult,
+    ) -> Result<()> {
+        if !self.publisher.is_identity() {
+            // Back from the pipeline's undistorted pixels to the published colour image's.
+            let back_start = Instant::now();
+            result.mask = self.publisher.to_published(result.mask)?;
+            result.accumulation_m = result
+                .accumulation_m
+                .map(|a| self.publisher.to_published(a))
+                .transpose()?;
+            self.report.timings.rectify_s += back_start.elapsed().as_secs_f64();
+        }
+        let frame = self
+            .in_flight
+            .pop_front()
+            .ok_or_else(|| Error::InvalidParameter {
+                name: "frame processor",
+                value: "a result for a frame it was not given".into(),
+                expected: "one result per frame pushed (internal error)".into(),
+            })?;
+        if self.world_from_odometry.is_none() {
+            match ctx.anchor_poses {
+                None => self.world_from_odometry = Some(Isometry3::identity()),
+                Some((_, poses)) => {
+                    match anchor_at(
+                        poses,
+                        ctx.config.max_pose_gap_ns,
+                        frame.timestamp_ns,
+                        &result.world_from_camera,
+                    ) {
+                        Some(anchor) => {
+                            self.world_from_odometry = Some(anchor);
+                            self.report.anchor_frame = Some(AnchorFrame {
+                                index: self.report.frames + self.unanchored.len() as u64,
+                                timestamp_ns: frame.timestamp_ns,
+                            });
+                            self.flush_unanchored(ctx, output, hooks)?;
+                        }
+                        None if self.unanchored.len() < MAX_UNANCHORED_FRAMES => {
+                            self.unanchored.push((frame, result));
+                            return Ok(());
+                        }
+                        None => {
+                            self.give_up_anchor(ctx);
+                            self.flush_unanchored(ctx, output, hooks)?;
+                        }
+                    }
+                }
+            }
+        }
+        self.emit(ctx, output, hooks, frame, result)
+    }
+
+    /// No frame is covered by the anchor channel (within [`MAX_UNANCHORED_FRAMES`]): the first
+    /// camera is `world`.
+    fn give_up_anchor(&mut self, ctx: &FrameContext<'_>) {
+        if let Some((topic, _)) = ctx.anchor_poses {
+            self.report.anchor_skipped = Some(format!(
+                "{topic} has no pose within {} ms of the first {} processed frames",
+                ctx.config.max_pose_gap_ns / 1_000_000,
+                self.unanchored.len()
+            ));
+        }
+        self.world_from_odometry = Some(Isometry3::identity());
+    }
+
+    /// Writes the held results, now that the odometry's frame is known.
+    fn flush_unanchored(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        hooks: &mut dyn ProcessHooks,
+    ) -> Result<()> {
+        for (frame, result) in std::mem::take(&mut self.unanchored) {
+            self.emit(ctx, output, hooks, frame, result)?;
+        }
+        Ok(())
+    }
+
+    /// Writes one frame's result (and the input messages before it) in the anchored frame.
+    fn emit(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        hooks: &mut dyn ProcessHooks,
+        frame: InFlight,
+        result: FrameResult,
+    ) -> Result<()> {
+        let stamp = frame.timestamp_ns;
+        // Copy everything that precedes this frame's new messages.
+        while self
+            .pending
+            .front()
+            .is_some_and(|m| m.header.log_time <= frame.log_time_ns)
+        {
+            if let Some(m) = self.pending.pop_front() {
+                output.send(WriteOp::Copy(m))?;
+            }
+        }
+        let stats = stats_message(
+            self.report.frames,
+            stamp,
+            &ctx.config.processor.pose_source,
+            &result,
+            frame.decode_ms,
+            frame.process_ms,
+        );
+        let world_from_odometry = self.world_from_odometry.unwrap_or_else(Isometry3::identity);
+        let pose = StampedPose {
+            timestamp_ns: stamp,
+            world_from_camera: world_from_odometry * result.world_from_camera,
+        };
+        hooks.frame_done(&pose, &result.mask)?;
+        output.send(WriteOp::Frame(Box::new(FrameWrite {
+            log_time_ns: frame.log_time_ns,
+            timestamp_ns: stamp,
+            frame_id: frame.frame_id,
+            mask: result.mask,
+            world_from_camera: pose.world_from_camera,
+            accumulation: result.accumulation_m,
+            stats,
+        })))?;
+        self.report.frames += 1;
+        Ok(())
+    }
+}
+
+/// The `/occmask/stats` message of one frame.
+fn stats_message(
+    frame_index: u64,
+    stamp: u64,
+    pose_source: &PoseSource,
+    result: &FrameResult,
+    decode_ms: f64,
+    process_ms: f64,
+) -> FrameStatsMsg {
+    let stats = &result.stats;
+    let (dvo_iterations, dvo_cost) = match &stats.dvo {
+        Some(d) if !pose_source.is_external() => (d.iterations_per_level.iter().sum(), d.final_cost),
+        _ => (0, 0.0),
+    };
+    let moving = moving_pixels(&result.mask);
+    let (sec, nsec) = split_ns(stamp);
+    FrameStatsMsg {
+        timestamp: JsonTime {
+            sec: sec.into(),
+            nsec,
+        },
+        frame_index,
+        pose_source: pose_source.as_str().into(),
+        dvo_status: stats.outcome.as_str().into(),
+        dvo_iterations,
+        dvo_cost: finite_or_zero(dvo_cost),
+        pose_fallback: stats.pose_fallback.as_str().into(),
+        consecutive_failures: stats.consecutive_failures,
+        detector_reset: stats.detector_reset,
+        valid_depth_fraction: finite_or_zero(stats.valid_depth_fraction),
+        moving_fraction: moving as f64 / result.mask.size().area().max(1) as f64,
+        moving_pixels: moving,
+        decode_ms: finite_or_zero(decode_ms),
+        process_ms: finite_or_zero(process_ms),
+    }
+}
+/// `value`, or 0 when it is NaN or infinite (JSON has no NaN: serde_json would write `null`,
+/// which the schema's `number` fields reject).
+fn finite_or_zero(value: f64) -> f64 {
+    if value.is_finite() {
+        value
+    } else {
+        0.0
+    }
+}
