@@ -25,18 +25,19 @@ use std::sync::mpsc::{Receiver, Sender};
 use std::time::Instant;
 
 use nalgebra::Isometry3;
+use prost::bytes::Bytes;
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::geometry::distortion::{CameraModel, LensDistortion};
-use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
+use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask, Rgb8};
 use crate::mcap_io::annotate::{
     moving_pixels, AnnotateOptions, AnnotatedWriter, FrameAnnotation, FrameStatsMsg, JsonTime,
     METADATA_ODOMETRY_ANCHOR, METADATA_PROCESS, METADATA_PROCESSOR_CONFIG,
 };
 use crate::mcap_io::input::decode::{
     decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into, read_poses,
-    CalibrationMsg,
+    rgb_from_image_into, CalibrationMsg,
 };
 use crate::mcap_io::input::detect::{detect_topics, RgbdTopics, TopicOverrides};
 use crate::mcap_io::input::{InputChannel, McapInput, RawMessage, Truncation};
@@ -45,6 +46,7 @@ use crate::pipeline::offline::OfflineProcessor;
 use crate::pipeline::{
     FrameInput, FrameOutput, PoseFallback, PoseSource, ProcessingMode, Processor, ProcessorConfig,
 };
+use crate::point_cloud::{PointGrid, POINT_STRIDE_BYTES};
 use crate::time::split_ns;
 use crate::trajectory::{interpolate, StampedPose};
 
@@ -388,12 +390,15 @@ struct Queued {
     decode_ms: f64,
     /// Seconds of it spent undistorting and registering.
     rectify_s: f64,
+    /// A colour image's colours at the [`PointGrid`] samples (`--points`).
+    point_colors: Option<Vec<[u8; 3]>>,
 }
 
 /// Processed image buffers on their way back to the prefetch thread.
 struct BufferPool {
     gray: Receiver<GrayF32>,
     depth: Receiver<DepthMeters>,
+    point_colors: Receiver<Vec<[u8; 3]>>,
 }
 
 /// What the prefetch thread hands over per input message.
@@ -437,6 +442,7 @@ struct FrameWrite {
     mask: Mask,
     world_from_camera: Isometry3<f64>,
     accumulation: Option<Image<f32>>,
+    points: Option<Bytes>,
     stats: FrameStatsMsg,
 }
 
@@ -450,6 +456,7 @@ impl WriteOp {
                     + f.accumulation
                         .as_ref()
                         .map_or(0, |a| std::mem::size_of_val(a.as_slice()))
+                    + f.points.as_ref().map_or(0, Bytes::len)
             }
         }
     }
@@ -495,6 +502,7 @@ fn write_ops<W: Write + Seek>(
                 mask: &f.mask,
                 world_from_camera: &f.world_from_camera,
                 accumulation: f.accumulation.as_ref(),
+                points: f.points.as_ref(),
                 stats: &f.stats,
             })?,
         }
@@ -528,7 +536,14 @@ impl Prefetched {
             )) => std::mem::size_of_val(d.as_slice()),
             None => 0,
         };
-        self.message.data.len() + pixels
+        let colors = match &self.image {
+            Some((_, q)) => q
+                .point_colors
+                .as_ref()
+                .map_or(0, |c| std::mem::size_of_val(c.as_slice())),
+            None => 0,
+        };
+        self.message.data.len() + pixels + colors
     }
 }
 
@@ -878,6 +893,19 @@ pub fn process_file<W: Write + Seek + Send>(
         &config.geometry,
     )?;
     let (rectifier, publisher) = Rectifier::new(&geometry)?;
+    // Points come from the pipeline's (undistorted, registered) depth, their colours from the
+    // published colour image through the lens.
+    let point_grid = config
+        .annotate
+        .points_stride_px
+        .map(|stride| {
+            PointGrid::new(
+                &geometry.pipeline,
+                geometry.undistort_color.then_some(&geometry.color),
+                stride,
+            )
+        })
+        .transpose()?;
     let external_poses = if config.pose_mode == PoseMode::External {
         load_external_poses(input, &topics, config)?
     } else {
@@ -913,6 +941,9 @@ pub fn process_file<W: Write + Seek + Send>(
         ),
     ]);
     metadata.extend(geometry.metadata());
+    if let Some(grid) = &point_grid {
+        metadata.insert("points_stride_px".to_owned(), grid.stride_px().to_string());
+    }
     if let Some((topic, _)) = &anchor_poses {
         metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), topic.clone());
     }
@@ -941,9 +972,11 @@ pub fn process_file<W: Write + Seek + Send>(
     // decoding reuses them instead of allocating and zero-filling 2.4 MB per VGA frame.
     let (gray_tx, gray_rx) = std::sync::mpsc::channel();
     let (depth_tx, depth_rx) = std::sync::mpsc::channel();
+    let (colors_tx, colors_rx) = std::sync::mpsc::channel();
     let pool_rx = BufferPool {
         gray: gray_rx,
         depth: depth_rx,
+        point_colors: colors_rx,
     };
     let mut state = FrameLoop {
         pairer: Pairer {
@@ -957,6 +990,8 @@ pub fn process_file<W: Write + Seek + Send>(
         gray: GrayF32::filled(ImageSize::new(0, 0), 0.0),
         depth_m: DepthMeters::filled(ImageSize::new(0, 0), 0.0),
         recycle: (gray_tx, depth_tx),
+        recycle_point_colors: colors_tx,
+        spare_point_depth: Vec::new(),
         publisher,
         processor: None,
         world_from_odometry: None,
@@ -993,56 +1028,71 @@ pub fn process_file<W: Write + Seek + Send>(
         calibration_size,
         external_poses: &external_poses,
         anchor_poses: anchor_poses.as_ref().map(|(t, p)| (t.as_str(), p.as_slice())),
+        point_grid: point_grid.as_ref(),
     };
     // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
     // pipeline and writes: decoding then overlaps with processing.
-    let decode =
-        |m: &RawMessage, pool: &BufferPool, rectifier: &mut Rectifier| -> Result<Option<(bool, Queued)>> {
-            let id = m.header.channel_id;
-            if id != topics.color.id && id != topics.depth.id {
-                return Ok(None);
-            }
-            let is_color = id == topics.color.id;
-            let start = config.timings.then(Instant::now);
-            let (ct, topic) = if is_color {
-                (color_ct, &topics.color.topic)
-            } else {
-                (depth_ct, &topics.depth.topic)
-            };
-            let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
-                // Decoded, then undistorted and registered for the pipeline.
-                let (pixels, rectify_s) = if is_color {
-                    let mut gray = pool
-                        .gray
-                        .try_recv()
-                        .unwrap_or_else(|_| GrayF32::filled(ImageSize::new(0, 0), 0.0));
-                    let s = rectifier.color(topic, &mut gray, |g| gray_from_image_into(&msg, topic, g))?;
-                    (Pixels::Gray(gray), s)
-                } else {
-                    let mut depth = pool
-                        .depth
-                        .try_recv()
-                        .unwrap_or_else(|_| DepthMeters::filled(ImageSize::new(0, 0), 0.0));
-                    let s = rectifier.depth(topic, &mut depth, |d| {
-                        depth_from_image_into(&msg, topic, depth_units_per_meter, d)
-                    })?;
-                    (Pixels::Depth(depth), s)
-                };
-                Ok((msg, pixels, rectify_s))
-            });
-            let (msg, pixels, rectify_s) = decoded.map_err(|e| at_message(e, &m.header))?;
-            Ok(Some((
-                is_color,
-                Queued {
-                    log_time_ns: m.header.log_time,
-                    timestamp_ns: msg.timestamp_ns,
-                    frame_id: msg.frame_id,
-                    pixels,
-                    decode_ms: start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3),
-                    rectify_s,
-                },
-            )))
+    let point_grid = point_grid.as_ref();
+    let decode = |m: &RawMessage,
+                  pool: &BufferPool,
+                  rectifier: &mut Rectifier,
+                  rgb: &mut Rgb8|
+     -> Result<Option<(bool, Queued)>> {
+        let id = m.header.channel_id;
+        if id != topics.color.id && id != topics.depth.id {
+            return Ok(None);
+        }
+        let is_color = id == topics.color.id;
+        let start = config.timings.then(Instant::now);
+        let (ct, topic) = if is_color {
+            (color_ct, &topics.color.topic)
+        } else {
+            (depth_ct, &topics.depth.topic)
         };
+        let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
+            // Decoded, then undistorted and registered for the pipeline.
+            let mut point_colors = None;
+            let (pixels, rectify_s) = if is_color {
+                let mut gray = pool
+                    .gray
+                    .try_recv()
+                    .unwrap_or_else(|_| GrayF32::filled(ImageSize::new(0, 0), 0.0));
+                let s = rectifier.color(topic, &mut gray, |g| gray_from_image_into(&msg, topic, g))?;
+                if let Some(grid) = point_grid {
+                    // A second decode, into RGB (the grey one keeps its own conversion, so
+                    // the masks do not depend on --points); only the samples are kept.
+                    rgb_from_image_into(&msg, topic, rgb)?;
+                    let mut colors = pool.point_colors.try_recv().unwrap_or_default();
+                    grid.sample_colors_into(rgb, &mut colors)?;
+                    point_colors = Some(colors);
+                }
+                (Pixels::Gray(gray), s)
+            } else {
+                let mut depth = pool
+                    .depth
+                    .try_recv()
+                    .unwrap_or_else(|_| DepthMeters::filled(ImageSize::new(0, 0), 0.0));
+                let s = rectifier.depth(topic, &mut depth, |d| {
+                    depth_from_image_into(&msg, topic, depth_units_per_meter, d)
+                })?;
+                (Pixels::Depth(depth), s)
+            };
+            Ok((msg, pixels, rectify_s, point_colors))
+        });
+        let (msg, pixels, rectify_s, point_colors) = decoded.map_err(|e| at_message(e, &m.header))?;
+        Ok(Some((
+            is_color,
+            Queued {
+                log_time_ns: m.header.log_time,
+                timestamp_ns: msg.timestamp_ns,
+                frame_id: msg.frame_id,
+                pixels,
+                decode_ms: start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3),
+                rectify_s,
+                point_colors,
+            },
+        )))
+    };
     let loop_start = Instant::now();
     let mut output_wait = std::time::Duration::ZERO;
     let (mut loop_s, mut writer_tail_s) = (0.0, 0.0);
@@ -1058,9 +1108,10 @@ pub fn process_file<W: Write + Seek + Send>(
         let decode = &decode;
         let mut rectifier = rectifier;
         scope.spawn(move || {
+            let mut rgb = Rgb8::filled(ImageSize::new(0, 0), [0; 3]);
             let result = input.for_each_message(read_topics, None, |message| {
-                let item =
-                    decode(&message, &pool_rx, &mut rectifier).map(|image| Prefetched { message, image });
+                let item = decode(&message, &pool_rx, &mut rectifier, &mut rgb)
+                    .map(|image| Prefetched { message, image });
                 let bytes = item.as_ref().map_or(0, Prefetched::bytes);
                 let failed = item.is_err();
                 // A closed channel means the consumer stopped (error or Ctrl-C): stop reading.
@@ -1138,6 +1189,8 @@ struct FrameContext<'a> {
     external_poses: &'a [StampedPose],
     /// [`OdometryAnchor`]: the channel and its poses, when the trajectory is anchored.
     anchor_poses: Option<(&'a str, &'a [StampedPose])>,
+    /// The samples of `--points`.
+    point_grid: Option<&'a PointGrid>,
 }
 
 struct FrameLoop {
@@ -1160,6 +1213,10 @@ struct FrameLoop {
     report: ProcessReport,
     /// Returns processed image buffers to the prefetch thread.
     recycle: (Sender<GrayF32>, Sender<DepthMeters>),
+    /// Returns the point colour samples to the prefetch thread.
+    recycle_point_colors: Sender<Vec<[u8; 3]>>,
+    /// Depth sample buffers of `--points` not in use.
+    spare_point_depth: Vec<Vec<f32>>,
 }
 
 /// What the frame loop keeps of a frame while the processor works on it.
@@ -1169,6 +1226,15 @@ struct InFlight {
     frame_id: String,
     decode_ms: f64,
     process_ms: f64,
+    /// `--points`: the frame's samples until its mask is known, then its packed points.
+    points: Option<PointSamples>,
+    cloud: Option<Bytes>,
+}
+
+/// The depth and colour of a frame at the [`PointGrid`] samples.
+struct PointSamples {
+    depth_m: Vec<f32>,
+    colors: Vec<[u8; 3]>,
 }
 
 impl FrameLoop {
@@ -1260,6 +1326,7 @@ impl FrameLoop {
         };
         let decode_ms = color.decode_ms + depth.decode_ms;
         let rectify_s = color.rectify_s + depth.rectify_s;
+        let point_colors = color.point_colors;
         if let (Pixels::Gray(gray), Pixels::Depth(depth_m)) = (color.pixels, depth.pixels) {
             // The receiver is gone once the prefetch thread has finished: nothing to recycle.
             let _ = self.recycle.0.send(std::mem::replace(&mut self.gray, gray));
@@ -1278,6 +1345,15 @@ impl FrameLoop {
                 found: cal,
             });
         }
+        // The depth the pipeline sees, sampled before its buffer goes back to the prefetch thread.
+        let points = match (ctx.point_grid, point_colors) {
+            (Some(grid), Some(colors)) => {
+                let mut depth_m = self.spare_point_depth.pop().unwrap_or_default();
+                grid.sample_depth_into(&self.depth_m, &mut depth_m)?;
+                Some(PointSamples { depth_m, colors })
+            }
+            _ => None,
+        };
         let processor = match &mut self.processor {
             Some(p) => p,
             None => self.processor.insert(make_processor(
@@ -1305,6 +1381,8 @@ impl FrameLoop {
             decode_ms,
             // Measured always (the report), written only with --timings (output bytes).
             process_ms: if ctx.config.timings { pipeline_s * 1e3 } else { 0.0 },
+            points,
+            cloud: None,
         });
         for result in results {
             self.write_result(ctx, output, hooks, result)?;
@@ -1321,6 +1399,23 @@ impl FrameLoop {
         hooks: &mut dyn ProcessHooks,
         mut result: ProcessedFrame,
     ) -> Result<()> {
+        let mut frame = self
+            .in_flight
+            .pop_front()
+            .ok_or_else(|| Error::InvalidParameter {
+                name: "frame processor",
+                value: "a result for a frame it was not given".into(),
+                expected: "one result per frame pushed (internal error)".into(),
+            })?;
+        if let (Some(grid), Some(samples)) = (ctx.point_grid, frame.points.take()) {
+            // Tinted by the mask in the pipeline's pixels, before it is mapped back.
+            let mut data = Vec::with_capacity(grid.samples() * POINT_STRIDE_BYTES);
+            grid.write_points(&samples.depth_m, &samples.colors, &result.mask, &mut data)?;
+            frame.cloud = Some(Bytes::from(data));
+            self.spare_point_depth.push(samples.depth_m);
+            // The receiver is gone once the prefetch thread has finished: nothing to recycle.
+            let _ = self.recycle_point_colors.send(samples.colors);
+        }
         if !self.publisher.is_identity() {
             // Back from the pipeline's undistorted pixels to the published colour image's.
             let back_start = Instant::now();
@@ -1331,14 +1426,6 @@ impl FrameLoop {
                 .transpose()?;
             self.report.timings.rectify_s += back_start.elapsed().as_secs_f64();
         }
-        let frame = self
-            .in_flight
-            .pop_front()
-            .ok_or_else(|| Error::InvalidParameter {
-                name: "frame processor",
-                value: "a result for a frame it was not given".into(),
-                expected: "one result per frame pushed (internal error)".into(),
-            })?;
         if self.world_from_odometry.is_none() {
             match ctx.anchor_poses {
                 None => self.world_from_odometry = Some(Isometry3::identity()),
@@ -1453,6 +1540,7 @@ impl FrameLoop {
             mask: result.mask,
             world_from_camera: pose.world_from_camera,
             accumulation: result.accumulation,
+            points: frame.cloud,
             stats,
         })))?;
         self.report.frames += 1;
