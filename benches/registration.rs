@@ -181,9 +181,8 @@ fn frame_loop_share(_c: &mut Criterion) {
     ratios.sort_by(f64::total_cmp);
     if let Some(median) = ratios.get(ratios.len() / 2) {
         println!(
-            "frame_loop_share ({} {}x{} colour, {}x{} depth, {rounds} rounds of {SHARE_FRAMES} frames): median \
-             rectify / pipeline {:.1} % (range {:.1}-{:.1} %)",
-            "realsense_like",
+            "frame_loop_share (realsense_like {}x{} colour, {}x{} depth, {rounds} rounds of {SHARE_FRAMES} frames): \
+             median rectify / pipeline {:.1} % (range {:.1}-{:.1} %)",
             rig.color.size.width,
             rig.color.size.height,
             rig.depth.size.width,
