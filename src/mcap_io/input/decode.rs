@@ -887,10 +887,13 @@ pub fn rgb_from_image_into(msg: &ImageMsg, topic: &str, rgb: &mut Rgb8) -> Resul
                     *out = match (yuv, bayer) {
                         (Some(uyvy), _) => {
                             let (u, v) = pixels::yuv422_chroma_offsets(x, uyvy);
+                            // The last pixel of an odd-width row has no complete pair: its
+                            // missing chroma is neutral (grey at its luma).
+                            let chroma = |i: usize| row.get(i).copied().unwrap_or(pixels::NEUTRAL_CHROMA);
                             pixels::rgb_from_video_yuv(
                                 row[pixels::yuv422_luma_offset(x, uyvy)],
-                                row[u],
-                                row[v],
+                                chroma(u),
+                                chroma(v),
                             )
                         }
                         (None, Some(pattern)) => pixels::demosaic_pixel(&rows, pattern, x, y),
@@ -1166,6 +1169,15 @@ mod tests {
             );
         }
         assert!(rgb_from_image_into(&raw("rgb8", 2, 3, vec![0; 5]), "/c", &mut rgb).is_err());
+        // An odd width: the last pixel's pair is cut short (a fuzzing finding: it indexed past
+        // the row); its chroma is neutral.
+        rgb_from_image_into(
+            &raw("uyvy", 3, 2, vec![128, 235, 128, 235, 128, 235]),
+            "/c",
+            &mut rgb,
+        )
+        .unwrap();
+        assert_eq!(rgb.as_slice()[2], [255; 3]);
     }
 
     #[test]

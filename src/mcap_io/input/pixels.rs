@@ -170,6 +170,9 @@ pub fn yuv422_chroma_offsets(x: usize, uyvy: bool) -> (usize, usize) {
     }
 }
 
+/// Chroma of no colour (U = V = 128).
+pub const NEUTRAL_CHROMA: u8 = 128;
+
 /// RGB from BT.601 video-range YUV (the standard conversion: luma 16–235, chroma 16–240
 /// around 128).
 #[inline]
