@@ -277,7 +277,10 @@ mod tests {
             // Back to its pixel: on the grid, with the depth and colour of that pixel.
             let u = (f64::from(x) / f64::from(z) * k.fx + k.cx).round() as usize;
             let v = (f64::from(y) / f64::from(z) * k.fy + k.cy).round() as usize;
-            assert!(u.is_multiple_of(4) && v.is_multiple_of(4) && u >= 12, "({u}, {v})");
+            assert!(
+                u.is_multiple_of(4) && v.is_multiple_of(4) && u >= 12,
+                "({u}, {v})"
+            );
             assert!((z - depth_m.get(u, v)).abs() < 1e-6);
             assert_eq!(a, 255);
             let expected = if mask.get(u, v) == MASK_SET {

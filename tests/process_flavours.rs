@@ -354,7 +354,10 @@ fn point_clouds_are_opt_in_sampled_coloured_and_tinted_where_moving() {
                 let (x, y, z) = (f(0), f(4), f(8));
                 let u = (x / z * k.fx + k.cx).round() as usize;
                 let v = (y / z * k.fy + k.cy).round() as usize;
-                assert!(u.is_multiple_of(stride) && v.is_multiple_of(stride) && u > 0, "({u}, {v})");
+                assert!(
+                    u.is_multiple_of(stride) && v.is_multiple_of(stride) && u > 0,
+                    "({u}, {v})"
+                );
                 assert!((z - f64::from(depth_mm(i, u, v)) / DEPTH_UNITS).abs() < 1e-6);
                 let moving = mask.1[v * spec.size.width + u] == 255;
                 let color = rgb_pixel(i, u, v);
