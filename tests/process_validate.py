@@ -6,12 +6,15 @@ Decodes every message: protobuf channels with mcap-protobuf-support, ROS 2 cdr c
 mcap-ros2-support, ROS 1 channels with mcap-ros1-support, json channels with json.loads. Checks: summary present; log times
 non-decreasing; FRAMES messages on /occmask/mask, /occmask/mask_annotations, /occmask/odometry
 and /occmask/stats; masks mono8 0/255 with the colour frame; annotations with translucent fill
-and the mask's stamp; unit quaternions; stats fields of schemas/occmask.FrameStats.json.
+and the mask's stamp; unit quaternions; stats fields of schemas/occmask.FrameStats.json;
+/occmask/points, when present: FRAMES point clouds at the masks' stamps with float32 x/y/z and
+uint8 red/green/blue/alpha fields inside the stride, finite points in front of the camera.
 Prints one JSON line with per-topic counts; exits 1 on any failure.
 """
 
 import json
 import math
+import struct
 import sys
 
 from mcap.reader import make_reader
@@ -36,6 +39,7 @@ def main():
     counts = {}
     mask_stamps = []
     annotation_stamps = []
+    cloud_stamps = []
     last = 0
     with open(path, "rb") as f:
         reader = make_reader(f)
@@ -72,6 +76,23 @@ def main():
                 for p in decoded.points:
                     if p.type != 2 or not (0 < p.fill_color.a < 1) or len(p.points) < 3:
                         fail("annotation polygon")
+            elif topic == "/occmask/points":
+                cloud_stamps.append(ns(decoded.timestamp))
+                stride = decoded.point_stride
+                fields = {f.name: (f.offset, f.type) for f in decoded.fields}
+                float32, uint8 = 7, 1
+                for name, kind in (("x", float32), ("y", float32), ("z", float32), ("red", uint8),
+                                   ("green", uint8), ("blue", uint8), ("alpha", uint8)):
+                    offset, found = fields.get(name, (None, None))
+                    size = 4 if kind == float32 else 1
+                    if found != kind or offset + size > stride:
+                        fail(f"point field {name}: {fields.get(name)}")
+                if stride <= 0 or len(decoded.data) % stride:
+                    fail(f"point data {len(decoded.data)} bytes, stride {stride}")
+                for o in range(0, len(decoded.data), stride):
+                    x, y, z = (struct.unpack_from("<f", decoded.data, o + fields[n][0])[0] for n in "xyz")
+                    if not all(math.isfinite(v) for v in (x, y, z)) or z <= 0:
+                        fail(f"point ({x}, {y}, {z})")
             elif topic == "/occmask/odometry":
                 q = decoded.pose.orientation
                 if abs(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w - 1) > 1e-9 or decoded.frame_id != "world":
@@ -93,6 +114,8 @@ def main():
             fail(f"{topic}: expected {frames} messages, found {counts.get(topic, 0)}")
     if mask_stamps != annotation_stamps:
         fail("annotation stamps differ from mask stamps")
+    if "/occmask/points" in counts and cloud_stamps != mask_stamps:
+        fail("point cloud stamps differ from mask stamps")
     print(json.dumps(counts, sort_keys=True))
 
 

@@ -12,13 +12,14 @@ use std::path::Path;
 
 use occmask::dataset;
 use occmask::geometry::distortion::CameraModel;
-use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
+use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8};
 use occmask::mcap_io::input::decode::{
     decode_calibration, decode_image, decode_poses, depth_from_image_into, gray_from_image_into,
-    CalibrationMsg, ImageMsg, ImagePayload,
+    rgb_from_image_into, CalibrationMsg, ImageMsg, ImagePayload,
 };
 use occmask::mcap_io::input::detect::{describe_channels, detect_topics, TopicOverrides};
 use occmask::mcap_io::input::{ChannelType, Flavor, McapInput, MessageType};
+use occmask::point_cloud::{PointGrid, POINT_STRIDE_BYTES};
 use occmask::registration;
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{parse_tum_line, tum_line};
@@ -39,19 +40,35 @@ fn channel(flavor: Flavor, message: MessageType) -> ChannelType {
     ChannelType { flavor, message }
 }
 
+/// The grey conversion (the pipeline's) and the RGB one (`process --points`): both take the same
+/// messages, at the same size.
+fn colour_conversions(msg: &ImageMsg) {
+    let mut gray = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+    let gray_ok = gray_from_image_into(msg, TOPIC, &mut gray).is_ok();
+    if gray_ok {
+        assert!(
+            gray.as_slice().iter().all(|v| (0.0..=1.0).contains(v)),
+            "gray outside 0..1"
+        );
+    }
+    let mut rgb = Rgb8::filled(ImageSize::new(1, 1), [0; 3]);
+    let rgb_ok = rgb_from_image_into(msg, TOPIC, &mut rgb).is_ok();
+    assert_eq!(
+        gray_ok, rgb_ok,
+        "grey and RGB decoding disagree on accepting the image"
+    );
+    if gray_ok {
+        assert_eq!(gray.size(), rgb.size(), "grey and RGB sizes differ");
+    }
+}
+
 /// Decodes an image and runs both pixel conversions (what `process` does per frame).
 fn image_and_pixels(ct: ChannelType, data: &[u8]) {
     let Ok(msg) = decode_image(ct, TOPIC, data) else {
         return;
     };
     let _ = msg.is_depth();
-    let mut gray = GrayF32::filled(ImageSize::new(1, 1), 0.0);
-    if gray_from_image_into(&msg, TOPIC, &mut gray).is_ok() {
-        assert!(
-            gray.as_slice().iter().all(|v| (0.0..=1.0).contains(v)),
-            "gray outside 0..1"
-        );
-    }
+    colour_conversions(&msg);
     let mut depth = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
     if depth_from_image_into(&msg, TOPIC, UNITS_PER_METER, &mut depth).is_ok() {
         assert!(
@@ -111,6 +128,21 @@ fn calibration_checks(c: &CalibrationMsg) {
         let mask = occmask::image_buf::Mask::filled(size, 255);
         let mut published = occmask::image_buf::Mask::filled(size, 0);
         let _ = back.apply_into(&mask, &mut published);
+        // `--points`: the samples of the pinhole view, coloured through this lens.
+        if let Ok(grid) = PointGrid::new(&pinhole, Some(&camera), 3) {
+            let (mut colors, mut depth, mut points) = (Vec::new(), Vec::new(), Vec::new());
+            let rgb = Rgb8::filled(size, [9, 8, 7]);
+            let depth_m = DepthMeters::filled(size, 1.5);
+            if grid.sample_colors_into(&rgb, &mut colors).is_ok()
+                && grid.sample_depth_into(&depth_m, &mut depth).is_ok()
+            {
+                let n = grid.write_points(&depth, &colors, &mask, &mut points);
+                assert!(
+                    n.is_ok_and(|n| n <= grid.samples() && points.len() == n * POINT_STRIDE_BYTES),
+                    "point cloud"
+                );
+            }
+        }
     }
     // Registration from this camera into a fixed pinhole one, 2 cm away.
     let target = CameraModel::pinhole(
@@ -261,13 +293,7 @@ pub fn field_pixels(data: &[u8]) {
         frame_id: "cam".into(),
         payload,
     };
-    let mut gray = GrayF32::filled(ImageSize::new(1, 1), 0.0);
-    if gray_from_image_into(&msg, TOPIC, &mut gray).is_ok() {
-        assert!(
-            gray.as_slice().iter().all(|v| (0.0..=1.0).contains(v)),
-            "gray outside 0..1"
-        );
-    }
+    colour_conversions(&msg);
     let mut depth = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
     if depth_from_image_into(&msg, TOPIC, UNITS_PER_METER, &mut depth).is_ok() {
         assert!(

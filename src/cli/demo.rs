@@ -13,8 +13,10 @@ use clap::Args;
 use occmask::convert::write_synthetic_sequence;
 use occmask::evaluate::{evaluate, format_report};
 use occmask::image_buf::ImageSize;
+use occmask::mcap_io::annotate::AnnotateOptions;
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::{AtomicOutput, McapWriteOptions};
+use occmask::point_cloud::DEFAULT_POINT_STRIDE_PX;
 use occmask::process::{pipeline_factory, process_file, PipelineOptions, ProcessConfig, ProcessHooks};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
@@ -39,6 +41,9 @@ pub struct DemoArgs {
     /// Random seed of textures and sensor noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Also write /occmask/points (as `process --points`).
+    #[arg(long)]
+    pub points: bool,
 }
 
 /// Stops processing on Ctrl-C / SIGTERM.
@@ -93,7 +98,13 @@ pub fn run(args: DemoArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let (sink, report) = process_file(
         &input,
         BufWriter::new(file),
-        &ProcessConfig::default(),
+        &ProcessConfig {
+            annotate: AnnotateOptions {
+                points_stride_px: args.points.then_some(DEFAULT_POINT_STRIDE_PX),
+                ..Default::default()
+            },
+            ..Default::default()
+        },
         &mut factory,
         &mut StopOnSignal,
     )?;

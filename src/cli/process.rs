@@ -18,6 +18,7 @@ use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::AtomicOutput;
 use occmask::occlusion::AppearanceGrowthConfig;
 use occmask::pipeline::{PoseSource, ProcessingMode, ProcessorConfig};
+use occmask::point_cloud::DEFAULT_POINT_STRIDE_PX;
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::rectify::GeometryOptions;
 use occmask::process::{
@@ -191,6 +192,16 @@ pub struct ProcessArgs {
     /// Also write the accumulation map as /occmask/accumulation (32FC1, for debugging).
     #[arg(long)]
     pub accumulation: bool,
+
+    /// Also write /occmask/points: a foxglove.PointCloud per frame from the depth the detector
+    /// used, in the estimated camera's frame, coloured from the colour image, moving points red
+    /// (for Foxglove's 3D panel).
+    #[arg(long)]
+    pub points: bool,
+
+    /// With --points: sample every this many pixels per axis.
+    #[arg(long, value_name = "PX", default_value_t = DEFAULT_POINT_STRIDE_PX, requires = "points")]
+    pub point_stride: usize,
 
     /// Measure per-frame decode/processing times into /occmask/stats (output bytes then
     /// differ between runs), and print where each file's frame loop spent its time.
@@ -373,6 +384,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
         annotate: AnnotateOptions {
             copy_input: !args.sidecar,
             accumulation: args.accumulation,
+            points_stride_px: args.points.then_some(args.point_stride),
             write: args.write.options(),
             ..Default::default()
         },

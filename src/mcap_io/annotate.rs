@@ -25,13 +25,15 @@
 //! | `/tf` (or [`TOPIC_TF_FALLBACK`]) | `foxglove.FrameTransform` world → [`FRAME_CAMERA_ESTIMATED`] |
 //! | [`TOPIC_PATH`] | `foxglove.PosesInFrame`, throttled trajectory so far |
 //! | [`TOPIC_ACCUMULATION`] | `foxglove.RawImage` `32FC1` accumulation map (opt-in) |
+//! | [`TOPIC_POINTS`] | `foxglove.PointCloud` in [`FRAME_CAMERA_ESTIMATED`], moving points tinted (opt-in; [`crate::point_cloud`]) |
 //! | [`TOPIC_STATS`] | JSON, schema `schemas/occmask.FrameStats.json` |
 
 use std::collections::{BTreeMap, HashMap};
 use std::io::{Seek, Write};
 
 use foxglove::messages::{
-    points_annotation, Color, ImageAnnotations, Point2, PointsAnnotation, PosesInFrame, RawImage,
+    packed_element_field::NumericType, points_annotation, Color, ImageAnnotations, PackedElementField,
+    Point2, PointCloud, PointsAnnotation, PosesInFrame, RawImage,
 };
 use foxglove::Encode;
 use mcap::records::MessageHeader;
@@ -42,6 +44,7 @@ use serde::Serialize;
 use crate::contour::{outer_contours, ContourOptions};
 use crate::error::{Error, Result};
 use crate::image_buf::{Image, Mask, MASK_SET};
+use crate::point_cloud::{OFFSET_RED, OFFSET_X, OFFSET_Y, OFFSET_Z, POINT_STRIDE_BYTES};
 
 use super::codec;
 use super::encoding::DepthEncoding;
@@ -59,6 +62,8 @@ pub const TOPIC_ODOMETRY: &str = "/occmask/odometry";
 pub const TOPIC_PATH: &str = "/occmask/path";
 /// Accumulation map (opt-in).
 pub const TOPIC_ACCUMULATION: &str = "/occmask/accumulation";
+/// Downsampled coloured points of each frame (opt-in).
+pub const TOPIC_POINTS: &str = "/occmask/points";
 /// Per-frame statistics (JSON).
 pub const TOPIC_STATS: &str = "/occmask/stats";
 /// Transform topic used instead of `/tf` when the input's `/tf` has another schema (e.g. ROS 2
@@ -111,6 +116,9 @@ pub struct AnnotateOptions {
     pub copy_input: bool,
     /// Write [`TOPIC_ACCUMULATION`].
     pub accumulation: bool,
+    /// Write [`TOPIC_POINTS`], sampling every this many pixels per axis (`None`: not written;
+    /// [`crate::point_cloud::DEFAULT_POINT_STRIDE_PX`] is the command line's default).
+    pub points_stride_px: Option<usize>,
     /// Compression and chunking.
     pub write: McapWriteOptions,
     /// Outline extraction.
@@ -122,6 +130,7 @@ impl Default for AnnotateOptions {
         Self {
             copy_input: true,
             accumulation: false,
+            points_stride_px: None,
             write: McapWriteOptions::default(),
             contours: ContourOptions::default(),
         }
@@ -185,6 +194,9 @@ pub struct FrameAnnotation<'a> {
     pub world_from_camera: &'a Isometry3<f64>,
     /// Accumulation map, written when enabled.
     pub accumulation: Option<&'a Image<f32>>,
+    /// Packed points ([`crate::point_cloud`]'s layout) in the camera's frame, written when
+    /// enabled.
+    pub points: Option<&'a Bytes>,
     /// Statistics.
     pub stats: &'a FrameStatsMsg,
 }
@@ -196,6 +208,7 @@ struct NewChannels {
     tf: u16,
     path: u16,
     accumulation: Option<u16>,
+    points: Option<u16>,
     stats: u16,
 }
 
@@ -290,6 +303,10 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
         } else {
             None
         };
+        let points = match options.points_stride_px {
+            Some(_) => Some(add(TOPIC_POINTS, schema_of::<PointCloud>()?)?),
+            None => None,
+        };
         let stats_schema = writer.add_schema(
             SCHEMA_FRAME_STATS,
             "jsonschema",
@@ -305,6 +322,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
                 tf,
                 path,
                 accumulation,
+                points,
                 stats,
             },
             sequences: HashMap::new(),
@@ -406,6 +424,33 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
                 encoding: DepthEncoding::F32.as_str().into(),
                 step: (acc.width() * 4) as u32,
                 data: Bytes::from(data),
+            };
+            self.write_proto(id, t, &msg)?;
+        }
+
+        if let (Some(id), Some(data)) = (self.channels.points, frame.points) {
+            let field = |name: &str, offset: usize, numeric: NumericType| PackedElementField {
+                name: name.into(),
+                offset: offset as u32,
+                r#type: numeric as i32,
+            };
+            let msg = PointCloud {
+                timestamp: Some(stamp),
+                // The points are in the camera's optical frame, whose pose is the odometry's
+                // transform world -> camera_estimated.
+                frame_id: FRAME_CAMERA_ESTIMATED.into(),
+                pose: codec::pose_in_frame(0, "", &Isometry3::identity()).pose,
+                point_stride: POINT_STRIDE_BYTES as u32,
+                fields: vec![
+                    field("x", OFFSET_X, NumericType::Float32),
+                    field("y", OFFSET_Y, NumericType::Float32),
+                    field("z", OFFSET_Z, NumericType::Float32),
+                    field("red", OFFSET_RED, NumericType::Uint8),
+                    field("green", OFFSET_RED + 1, NumericType::Uint8),
+                    field("blue", OFFSET_RED + 2, NumericType::Uint8),
+                    field("alpha", OFFSET_RED + 3, NumericType::Uint8),
+                ],
+                data: data.clone(),
             };
             self.write_proto(id, t, &msg)?;
         }

@@ -7,6 +7,7 @@ use std::sync::mpsc::Sender;
 use std::time::Instant;
 
 use nalgebra::Isometry3;
+use prost::bytes::Bytes;
 
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
@@ -15,6 +16,7 @@ use crate::mcap_io::annotate::{moving_pixels, FrameStatsMsg, JsonTime};
 use crate::mcap_io::input::detect::RgbdTopics;
 use crate::mcap_io::input::RawMessage;
 use crate::pipeline::{FrameInput, FrameResult, PoseSource};
+use crate::point_cloud::{PointGrid, POINT_STRIDE_BYTES};
 use crate::time::split_ns;
 use crate::trajectory::StampedPose;
 
@@ -37,6 +39,8 @@ pub(super) struct FrameContext<'a> {
     pub(super) poses: &'a InputPoses,
     /// [`OdometryAnchor`]: the channel and its poses, when the trajectory is anchored.
     pub(super) anchor_poses: Option<(&'a str, &'a [StampedPose])>,
+    /// The samples of `--points`.
+    pub(super) point_grid: Option<&'a PointGrid>,
 }
 
 /// The frame loop's state.
@@ -60,6 +64,10 @@ pub(super) struct FrameLoop {
     pub(super) report: ProcessReport,
     /// Returns processed image buffers to the prefetch thread.
     pub(super) recycle: (Sender<GrayF32>, Sender<DepthMeters>),
+    /// Returns the point colour samples to the prefetch thread.
+    pub(super) recycle_point_colors: Sender<Vec<[u8; 3]>>,
+    /// Depth sample buffers of `--points` not in use.
+    pub(super) spare_point_depth: Vec<Vec<f32>>,
 }
 
 /// What the frame loop keeps of a frame while the processor works on it.
@@ -69,6 +77,15 @@ pub(super) struct InFlight {
     frame_id: String,
     decode_ms: f64,
     process_ms: f64,
+    /// `--points`: the frame's samples until its mask is known, then its packed points.
+    points: Option<PointSamples>,
+    cloud: Option<Bytes>,
+}
+
+/// The depth and colour of a frame at the [`PointGrid`] samples.
+struct PointSamples {
+    depth_m: Vec<f32>,
+    colors: Vec<[u8; 3]>,
 }
 
 impl FrameLoop {
@@ -157,6 +174,7 @@ impl FrameLoop {
         };
         let decode_ms = color.decode_ms + depth.decode_ms;
         let rectify_s = color.rectify_s + depth.rectify_s;
+        let point_colors = color.point_colors;
         if let (Pixels::Gray(gray), Pixels::Depth(depth_m)) = (color.pixels, depth.pixels) {
             // The receiver is gone once the prefetch thread has finished: nothing to recycle.
             let _ = self.recycle.0.send(std::mem::replace(&mut self.gray, gray));
@@ -172,6 +190,15 @@ impl FrameLoop {
                 calibration: cal,
             });
         }
+        // The depth the pipeline sees, sampled before its buffer goes back to the prefetch thread.
+        let points = match (ctx.point_grid, point_colors) {
+            (Some(grid), Some(colors)) => {
+                let mut depth_m = self.spare_point_depth.pop().unwrap_or_default();
+                grid.sample_depth_into(&self.depth_m, &mut depth_m)?;
+                Some(PointSamples { depth_m, colors })
+            }
+            _ => None,
+        };
         let processor = match &mut self.processor {
             Some(p) => p,
             None => self
@@ -197,6 +224,8 @@ impl FrameLoop {
             decode_ms,
             // Measured always (the report), written only with --timings (output bytes).
             process_ms: if ctx.config.timings { pipeline_s * 1e3 } else { 0.0 },
+            points,
+            cloud: None,
         });
         for result in results {
             self.write_result(ctx, output, hooks, result)?;
@@ -213,6 +242,23 @@ impl FrameLoop {
         hooks: &mut dyn ProcessHooks,
         mut result: FrameResult,
     ) -> Result<()> {
+        let mut frame = self
+            .in_flight
+            .pop_front()
+            .ok_or_else(|| Error::InvalidParameter {
+                name: "frame processor",
+                value: "a result for a frame it was not given".into(),
+                expected: "one result per frame pushed (internal error)".into(),
+            })?;
+        if let (Some(grid), Some(samples)) = (ctx.point_grid, frame.points.take()) {
+            // Tinted by the mask in the pipeline's pixels, before it is mapped back.
+            let mut data = Vec::with_capacity(grid.samples() * POINT_STRIDE_BYTES);
+            grid.write_points(&samples.depth_m, &samples.colors, &result.mask, &mut data)?;
+            frame.cloud = Some(Bytes::from(data));
+            self.spare_point_depth.push(samples.depth_m);
+            // The receiver is gone once the prefetch thread has finished: nothing to recycle.
+            let _ = self.recycle_point_colors.send(samples.colors);
+        }
         if !self.publisher.is_identity() {
             // Back from the pipeline's undistorted pixels to the published colour image's.
             let back_start = Instant::now();
@@ -223,14 +269,6 @@ impl FrameLoop {
                 .transpose()?;
             self.report.timings.rectify_s += back_start.elapsed().as_secs_f64();
         }
-        let frame = self
-            .in_flight
-            .pop_front()
-            .ok_or_else(|| Error::InvalidParameter {
-                name: "frame processor",
-                value: "a result for a frame it was not given".into(),
-                expected: "one result per frame pushed (internal error)".into(),
-            })?;
         if self.world_from_odometry.is_none() {
             match ctx.anchor_poses {
                 None => self.world_from_odometry = Some(Isometry3::identity()),
@@ -331,6 +369,7 @@ impl FrameLoop {
             mask: result.mask,
             world_from_camera: pose.world_from_camera,
             accumulation: result.accumulation_m,
+            points: frame.cloud,
             stats,
         })))?;
         self.report.frames += 1;

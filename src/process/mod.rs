@@ -33,13 +33,14 @@ use std::time::Instant;
 
 use crate::error::{CalibrationGap, Error, Result};
 use crate::geometry::distortion::CameraModel;
-use crate::image_buf::{DepthMeters, GrayF32, ImageSize};
+use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8};
 use crate::mcap_io::annotate::{
     AnnotatedWriter, METADATA_ODOMETRY_ANCHOR, METADATA_PROCESS, METADATA_PROCESSOR_CONFIG,
 };
 use crate::mcap_io::input::detect::detect_topics;
 use crate::mcap_io::input::McapInput;
 use crate::mcap_io::DEPTH_UNITS_KEY;
+use crate::point_cloud::PointGrid;
 
 pub mod adapter;
 pub mod batch;
@@ -132,6 +133,19 @@ pub fn process_file<W: Write + Seek + Send>(
         &config.geometry,
     )?;
     let (rectifier, publisher) = Rectifier::new(&geometry)?;
+    // Points come from the pipeline's (undistorted, registered) depth, their colours from the
+    // published colour image through the lens.
+    let point_grid = config
+        .annotate
+        .points_stride_px
+        .map(|stride| {
+            PointGrid::new(
+                &geometry.pipeline,
+                geometry.undistort_color.then_some(&geometry.color),
+                stride,
+            )
+        })
+        .transpose()?;
     let input_poses = InputPoses::load(input, &topics, config)?;
     let (anchor_poses, anchor_skipped) = match load_anchor_poses(input, config) {
         Ok(poses) => (poses, None),
@@ -166,6 +180,9 @@ pub fn process_file<W: Write + Seek + Send>(
         ),
     ]);
     metadata.extend(geometry.metadata());
+    if let Some(grid) = &point_grid {
+        metadata.insert("points_stride_px".to_owned(), grid.stride_px().to_string());
+    }
     if let Some((topic, _)) = &anchor_poses {
         metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), topic.clone());
     }
@@ -194,9 +211,11 @@ pub fn process_file<W: Write + Seek + Send>(
     // decoding reuses them instead of allocating and zero-filling 2.4 MB per VGA frame.
     let (gray_tx, gray_rx) = std::sync::mpsc::channel();
     let (depth_tx, depth_rx) = std::sync::mpsc::channel();
+    let (colors_tx, colors_rx) = std::sync::mpsc::channel();
     let pool_rx = BufferPool {
         gray: gray_rx,
         depth: depth_rx,
+        point_colors: colors_rx,
     };
     let mut state = FrameLoop {
         pairer: Pairer::new(config.pair_tolerance_ns),
@@ -206,6 +225,8 @@ pub fn process_file<W: Write + Seek + Send>(
         gray: GrayF32::filled(ImageSize::new(0, 0), 0.0),
         depth_m: DepthMeters::filled(ImageSize::new(0, 0), 0.0),
         recycle: (gray_tx, depth_tx),
+        recycle_point_colors: colors_tx,
+        spare_point_depth: Vec::new(),
         publisher,
         processor: None,
         world_from_odometry: None,
@@ -242,6 +263,7 @@ pub fn process_file<W: Write + Seek + Send>(
         calibration_size,
         poses: &input_poses,
         anchor_poses: anchor_poses.as_ref().map(|(t, p)| (t.as_str(), p.as_slice())),
+        point_grid: point_grid.as_ref(),
     };
     // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
     // pipeline and writes: decoding then overlaps with processing.
@@ -251,6 +273,7 @@ pub fn process_file<W: Write + Seek + Send>(
         depth_ct,
         depth_units_per_meter,
         timings: config.timings,
+        point_grid: point_grid.as_ref(),
     };
     let loop_start = Instant::now();
     let mut output_wait = std::time::Duration::ZERO;
@@ -267,9 +290,10 @@ pub fn process_file<W: Write + Seek + Send>(
         let decoder = &decoder;
         let mut rectifier = rectifier;
         scope.spawn(move || {
+            let mut rgb = Rgb8::filled(ImageSize::new(0, 0), [0; 3]);
             let result = input.for_each_message(read_topics, None, |message| {
                 let item = decoder
-                    .decode(&message, &pool_rx, &mut rectifier)
+                    .decode(&message, &pool_rx, &mut rectifier, &mut rgb)
                     .map(|image| Prefetched { message, image });
                 let bytes = item.as_ref().map_or(0, Prefetched::bytes);
                 let failed = item.is_err();

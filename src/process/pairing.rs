@@ -20,6 +20,9 @@ pub(super) enum Pixels {
     Depth(DepthMeters),
 }
 
+#[cfg(doc)]
+use crate::point_cloud::PointGrid;
+
 /// A colour or depth image, decoded by the prefetch thread, waiting for its partner.
 pub(super) struct Queued {
     pub(super) log_time_ns: u64,
@@ -29,6 +32,8 @@ pub(super) struct Queued {
     pub(super) decode_ms: f64,
     /// Seconds of it spent undistorting and registering.
     pub(super) rectify_s: f64,
+    /// A colour image's colours at the [`PointGrid`] samples (`--points`).
+    pub(super) point_colors: Option<Vec<[u8; 3]>>,
 }
 
 /// What [`Pairer::next`] decided about the oldest waiting image(s).

@@ -5,13 +5,15 @@
 use std::time::Instant;
 
 use crate::error::{CalibrationGap, Error, Result};
-use crate::image_buf::{DepthMeters, GrayF32, ImageSize};
+use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8};
 use crate::mcap_io::input::decode::{
-    decode_calibration, decode_image, depth_from_image_into, gray_from_image_into, CalibrationMsg,
+    decode_calibration, decode_image, depth_from_image_into, gray_from_image_into, rgb_from_image_into,
+    CalibrationMsg,
 };
 use crate::mcap_io::input::detect::RgbdTopics;
 use crate::mcap_io::input::{ChannelType, InputChannel, McapInput, RawMessage};
 use crate::mcap_io::DEPTH_UNITS_KEY;
+use crate::point_cloud::PointGrid;
 
 use super::config::DEFAULT_DEPTH_UNITS_PER_METER;
 use super::pairing::{Pixels, Queued};
@@ -141,11 +143,14 @@ pub(super) struct ImageDecoder<'a> {
     pub(super) depth_units_per_meter: f64,
     /// Measure the decoding time (written to `/occmask/stats` with `--timings`).
     pub(super) timings: bool,
+    /// `--points`: colour images are also sampled at the grid's points.
+    pub(super) point_grid: Option<&'a PointGrid>,
 }
 
 impl ImageDecoder<'_> {
     /// The decoded image when `m` is on the colour (`true`) or depth topic; `None` for other
-    /// topics. Buffers come from `pool` when the frame loop has returned some.
+    /// topics. Buffers come from `pool` when the frame loop has returned some; `rgb` is the
+    /// scratch of `--points`' colour decode.
     ///
     /// # Errors
     /// Undecodable images (naming the message), size changes, rectification errors.
@@ -154,6 +159,7 @@ impl ImageDecoder<'_> {
         m: &RawMessage,
         pool: &BufferPool,
         rectifier: &mut Rectifier,
+        rgb: &mut Rgb8,
     ) -> Result<Option<(bool, Queued)>> {
         let topics = self.topics;
         let id = m.header.channel_id;
@@ -169,12 +175,21 @@ impl ImageDecoder<'_> {
         };
         let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
             // Decoded, then undistorted and registered for the pipeline.
+            let mut point_colors = None;
             let (pixels, rectify_s) = if is_color {
                 let mut gray = pool
                     .gray
                     .try_recv()
                     .unwrap_or_else(|_| GrayF32::filled(ImageSize::new(0, 0), 0.0));
                 let s = rectifier.color(topic, &mut gray, |g| gray_from_image_into(&msg, topic, g))?;
+                if let Some(grid) = self.point_grid {
+                    // A second decode, into RGB (the grey one keeps its own conversion, so
+                    // the masks do not depend on --points); only the samples are kept.
+                    rgb_from_image_into(&msg, topic, rgb)?;
+                    let mut colors = pool.point_colors.try_recv().unwrap_or_default();
+                    grid.sample_colors_into(rgb, &mut colors)?;
+                    point_colors = Some(colors);
+                }
                 (Pixels::Gray(gray), s)
             } else {
                 let mut depth = pool
@@ -186,9 +201,9 @@ impl ImageDecoder<'_> {
                 })?;
                 (Pixels::Depth(depth), s)
             };
-            Ok((msg, pixels, rectify_s))
+            Ok((msg, pixels, rectify_s, point_colors))
         });
-        let (msg, pixels, rectify_s) = decoded.map_err(|e| at_message(e, &m.header))?;
+        let (msg, pixels, rectify_s, point_colors) = decoded.map_err(|e| at_message(e, &m.header))?;
         Ok(Some((
             is_color,
             Queued {
@@ -198,6 +213,7 @@ impl ImageDecoder<'_> {
                 pixels,
                 decode_ms: start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3),
                 rectify_s,
+                point_colors,
             },
         )))
     }

@@ -12,6 +12,8 @@ use nalgebra::Isometry3;
 
 use crate::error::{Error, Result};
 use crate::image_buf::{DepthMeters, GrayF32, Image, Mask};
+use prost::bytes::Bytes;
+
 use crate::mcap_io::annotate::{AnnotatedWriter, FrameAnnotation, FrameStatsMsg};
 use crate::mcap_io::input::RawMessage;
 
@@ -22,6 +24,7 @@ use super::queue::{ByteReceiver, ByteSender};
 pub(super) struct BufferPool {
     pub(super) gray: Receiver<GrayF32>,
     pub(super) depth: Receiver<DepthMeters>,
+    pub(super) point_colors: Receiver<Vec<[u8; 3]>>,
 }
 
 /// What the prefetch thread hands over per input message.
@@ -69,7 +72,14 @@ impl Prefetched {
             )) => std::mem::size_of_val(d.as_slice()),
             None => 0,
         };
-        self.message.data.len() + pixels
+        let colors = match &self.image {
+            Some((_, q)) => q
+                .point_colors
+                .as_ref()
+                .map_or(0, |c| std::mem::size_of_val(c.as_slice())),
+            None => 0,
+        };
+        self.message.data.len() + pixels + colors
     }
 }
 
@@ -89,6 +99,7 @@ pub(super) struct FrameWrite {
     pub(super) mask: Mask,
     pub(super) world_from_camera: Isometry3<f64>,
     pub(super) accumulation: Option<Image<f32>>,
+    pub(super) points: Option<Bytes>,
     pub(super) stats: FrameStatsMsg,
 }
 
@@ -102,6 +113,7 @@ impl WriteOp {
                     + f.accumulation
                         .as_ref()
                         .map_or(0, |a| std::mem::size_of_val(a.as_slice()))
+                    + f.points.as_ref().map_or(0, Bytes::len)
             }
         }
     }
@@ -144,6 +156,7 @@ pub(super) fn write_ops<W: Write + Seek>(
                 mask: &f.mask,
                 world_from_camera: &f.world_from_camera,
                 accumulation: f.accumulation.as_ref(),
+                points: f.points.as_ref(),
                 stats: &f.stats,
             })?,
         }

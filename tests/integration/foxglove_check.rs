@@ -109,7 +109,8 @@ fn demo_output_passes_the_foxglove_check_and_a_wrong_layout_fails_it() {
     }
 }
 
-/// Real data through `convert` and `process`: a static scene (empty annotations), real stamps.
+/// Real data through `convert` and `process --points`: a static scene (empty annotations), real
+/// stamps, the point clouds in the 3D panel.
 #[test]
 fn processed_tum_output_passes_the_foxglove_check() {
     let Some(script) = check_script() else { return };
@@ -132,11 +133,15 @@ fn processed_tum_output_passes_the_foxglove_check() {
         "-o".as_ref(),
         processed.as_os_str(),
         "--quiet".as_ref(),
+        "--points".as_ref(),
     ]);
     assert!(run.status.success(), "{}", stderr(&run));
     let stdout = assert_passes(&script, &processed);
-    assert!(
-        stdout.contains("ok   timeline from the chunk indexes equals the messages' time range"),
-        "{stdout}"
-    );
+    for expected in [
+        "ok   timeline from the chunk indexes equals the messages' time range",
+        "ok   /occmask/points: PointCloud per colour image",
+        "ok   3D!occmask-scene: topic /occmask/points is in the file",
+    ] {
+        assert!(stdout.contains(expected), "{expected}\n{stdout}");
+    }
 }

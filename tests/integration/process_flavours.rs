@@ -15,7 +15,7 @@ use prost::Message as _;
 
 use occmask::mcap_io::annotate::{
     AnnotateOptions, FRAME_CAMERA_ESTIMATED, TOPIC_ACCUMULATION, TOPIC_MASK, TOPIC_MASK_ANNOTATIONS,
-    TOPIC_ODOMETRY, TOPIC_PATH, TOPIC_STATS, TOPIC_TF_FALLBACK,
+    TOPIC_ODOMETRY, TOPIC_PATH, TOPIC_POINTS, TOPIC_STATS, TOPIC_TF_FALLBACK,
 };
 use occmask::mcap_io::input::McapInput;
 use occmask::process::{process_file, NoHooks, ProcessConfig, ProcessReport};
@@ -285,6 +285,94 @@ fn sidecar_has_only_new_channels_and_accumulation_is_opt_in() {
         (acc.encoding.as_str(), acc.step, acc.data.len()),
         ("32FC1", 64 * 4, 64 * 48 * 4)
     );
+}
+
+/// `--points`: absent by default; with it, one `foxglove.PointCloud` per frame in the estimated
+/// camera's frame, every 4th pixel per axis with depth, in the colour image's colours, the
+/// moving pixels tinted; nothing else in the output changes.
+#[test]
+fn point_clouds_are_opt_in_sampled_coloured_and_tinted_where_moving() {
+    use occmask::point_cloud::{tint, POINT_STRIDE_BYTES};
+    let dir = tempfile::tempdir().unwrap();
+    let spec = FixtureSpec::default();
+    let stride = 4;
+    for flavor in ALL_FLAVORS {
+        let path = write_input(dir.path(), flavor, &spec);
+        let (plain, _) = run(&path, &ProcessConfig::default()).unwrap();
+        let plain = by_topic(&plain);
+        assert!(!plain.contains_key(TOPIC_POINTS), "{flavor:?}");
+        let config = ProcessConfig {
+            annotate: AnnotateOptions {
+                points_stride_px: Some(stride),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let (bytes, report) = run(&path, &config).unwrap();
+        let out = by_topic(&bytes);
+        // Masks, poses and stats are those of the run without points.
+        for topic in [TOPIC_MASK, TOPIC_ODOMETRY, TOPIC_STATS] {
+            assert_eq!(out[topic], plain[topic], "{flavor:?} {topic}");
+        }
+        let clouds = &out[TOPIC_POINTS];
+        assert_eq!(clouds.len() as u64, report.frames, "{flavor:?}");
+        let k = report.intrinsics;
+        let mut tinted = 0;
+        for (i, ((_, log_time, _, data), mask)) in clouds.iter().zip(masks(&out)).enumerate() {
+            let cloud = fm::PointCloud::decode(data.as_slice()).unwrap();
+            let mask_msg = fm::RawImage::decode(out[TOPIC_MASK][i].3.as_slice()).unwrap();
+            assert_eq!(*log_time, out[TOPIC_MASK][i].1);
+            assert_eq!(cloud.timestamp, mask_msg.timestamp);
+            assert_eq!(cloud.frame_id, FRAME_CAMERA_ESTIMATED);
+            assert_eq!(cloud.point_stride as usize, POINT_STRIDE_BYTES);
+            let fields: Vec<(&str, u32, i32)> = cloud
+                .fields
+                .iter()
+                .map(|f| (f.name.as_str(), f.offset, f.r#type))
+                .collect();
+            assert_eq!(
+                fields,
+                [
+                    ("x", 0, 7),
+                    ("y", 4, 7),
+                    ("z", 8, 7),
+                    ("red", 12, 1),
+                    ("green", 13, 1),
+                    ("blue", 14, 1),
+                    ("alpha", 15, 1)
+                ]
+            );
+            // Every 4th pixel per axis (16 × 12) but the depth hole in column 0.
+            let expected_points = (spec.size.width / stride - 1) * (spec.size.height / stride);
+            assert_eq!(
+                cloud.data.len(),
+                expected_points * POINT_STRIDE_BYTES,
+                "{flavor:?} frame {i}"
+            );
+            for p in cloud.data.chunks_exact(POINT_STRIDE_BYTES) {
+                let f = |o: usize| f64::from(f32::from_le_bytes(p[o..o + 4].try_into().unwrap()));
+                let (x, y, z) = (f(0), f(4), f(8));
+                let u = (x / z * k.fx + k.cx).round() as usize;
+                let v = (y / z * k.fy + k.cy).round() as usize;
+                assert!(
+                    u.is_multiple_of(stride) && v.is_multiple_of(stride) && u > 0,
+                    "({u}, {v})"
+                );
+                assert!((z - f64::from(depth_mm(i, u, v)) / DEPTH_UNITS).abs() < 1e-6);
+                let moving = mask.1[v * spec.size.width + u] == 255;
+                let color = rgb_pixel(i, u, v);
+                let expected = if moving { tint(color) } else { color };
+                assert_eq!(
+                    &p[12..16],
+                    &[expected[0], expected[1], expected[2], 255],
+                    "{flavor:?} ({u}, {v})"
+                );
+                tinted += usize::from(moving);
+            }
+        }
+        // The moving square was sampled and tinted (not vacuously: it is masked in most frames).
+        assert!(tinted >= 10, "{flavor:?}: {tinted} tinted points");
+    }
 }
 
 #[test]
@@ -613,6 +701,65 @@ mod geometry {
         }
         w.finish().unwrap();
         out
+    }
+
+    /// A copy of `path` with the data of every message on `topic` replaced by `data`.
+    fn replacing(dir: &Path, path: &Path, topic: &str, data: &[u8], name: &str) -> PathBuf {
+        let bytes = std::fs::read(path).unwrap();
+        let out = dir.join(name);
+        let mut w = mcap::WriteOptions::new()
+            .profile("ros2")
+            .create(BufWriter::new(std::fs::File::create(&out).unwrap()))
+            .unwrap();
+        for mut m in mcap::MessageStream::new(&bytes).unwrap().map(Result::unwrap) {
+            if m.channel.topic == topic {
+                m.data = std::borrow::Cow::Owned(data.to_vec());
+            }
+            w.write(&m).unwrap();
+        }
+        w.finish().unwrap();
+        out
+    }
+
+    /// A transform channel that does not link the two cameras, or that does not decode, is an
+    /// error naming the frames looked for and what was found; never a silent identity.
+    #[test]
+    fn broken_or_undecodable_transforms_are_errors_naming_the_frames() {
+        use occmask::mcap_io::ros_out::{encode_transforms, RosTransform};
+        let dir = tempfile::tempdir().unwrap();
+        let rig = RgbdRig::realsense_like(&config());
+        let path = recording(dir.path(), "rs.mcap", &rig, RosVersion::Ros2);
+        // The chain stops at camera_link: nothing reaches the depth camera.
+        let stump = encode_transforms(
+            RosVersion::Ros2,
+            0,
+            &[RosTransform {
+                parent: "camera_link",
+                child: rig_names::COLOR_FRAME,
+                parent_from_child: nalgebra::Isometry3::identity(),
+            }],
+        )
+        .unwrap();
+        let broken = replacing(dir.path(), &path, rig_names::TF_STATIC, &stump, "broken.mcap");
+        let err = run(&broken, &ProcessConfig::default()).unwrap_err().to_string();
+        assert!(
+            err.contains(rig_names::DEPTH_FRAME)
+                && err.contains(rig_names::COLOR_FRAME)
+                && err.contains(&format!("searched {}", rig_names::TF_STATIC))
+                && err.contains("camera_link")
+                && err.contains("--depth-to-color"),
+            "{err}"
+        );
+        // Bytes that are no TFMessage: the decode error names the channel.
+        let garbage = replacing(
+            dir.path(),
+            &path,
+            rig_names::TF_STATIC,
+            &[0, 1, 0, 0, 7],
+            "garbage.mcap",
+        );
+        let err = run(&garbage, &ProcessConfig::default()).unwrap_err().to_string();
+        assert!(err.contains(rig_names::TF_STATIC), "{err}");
     }
 
     /// What the pipeline was given for one frame.

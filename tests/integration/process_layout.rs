@@ -14,7 +14,7 @@ use std::io::Cursor;
 
 use occmask::mcap_io::annotate::{
     AnnotateOptions, METADATA_PROCESS, TOPIC_MASK, TOPIC_MASK_ANNOTATIONS, TOPIC_ODOMETRY, TOPIC_PATH,
-    TOPIC_STATS,
+    TOPIC_POINTS, TOPIC_STATS,
 };
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::{
@@ -59,6 +59,7 @@ fn layout_panels_show_topics_we_write() {
         TOPIC_MASK_ANNOTATIONS,
         TOPIC_ODOMETRY,
         TOPIC_PATH,
+        TOPIC_POINTS,
         TOPIC_STATS,
     ];
     let mut shown = Vec::new();
@@ -95,6 +96,13 @@ fn layout_panels_show_topics_we_write() {
     let depth = &configs["Image!occmask-depth"]["imageMode"];
     assert_eq!(depth["colorMap"], "turbo");
     assert_eq!(depth["maxValue"], 30000);
+    // The 3D panel shows the points in their own colours (the moving ones tinted) beside both
+    // trajectories.
+    let scene = &configs["3D!occmask-scene"]["topics"];
+    assert_eq!(scene[TOPIC_POINTS]["colorMode"], "rgba-fields");
+    for topic in [TOPIC_PATH, TOPIC_ODOMETRY, TOPIC_GROUNDTRUTH_POSE] {
+        assert_eq!(scene[topic]["visible"], true, "{topic}");
+    }
 }
 
 /// Foxglove and Lichtblick take a file's time range from its chunk indexes (the smallest

@@ -159,6 +159,7 @@ fn process_outputs_of_every_flavour_pass_doctor_and_the_python_readers() {
                 annotate: AnnotateOptions {
                     copy_input: !sidecar,
                     accumulation: true,
+                    points_stride_px: Some(4),
                     ..Default::default()
                 },
                 ..Default::default()

@@ -48,7 +48,12 @@ const THREE_D_TOPIC_SCHEMAS = new Set([
   "foxglove.FrameTransforms",
   "tf2_msgs/msg/TFMessage",
   "geometry_msgs/msg/PoseStamped",
+  "foxglove.PointCloud",
 ]);
+// Opt-in channels (`process --points`): the layout shows them when the file has them.
+const OPTIONAL_TOPICS = new Set(["/groundtruth/pose", "/occmask/points"]);
+// foxglove.PackedElementField.NumericType values the point-cloud check needs.
+const NUMERIC = { UINT8: 1, FLOAT32: 7 };
 // Raw encodings Foxglove's Image panel decodes (decodeRawImage), with bytes per pixel.
 const RAW_ENCODING_BYTES = {
   rgb8: 3, bgr8: 3, "8UC3": 3, rgba8: 4, bgra8: 4, mono8: 1, "8UC1": 1, mono16: 2, "16UC1": 2,
@@ -532,11 +537,50 @@ async function main(argv) {
     report.check(paths.length > 0 && bad.length === 0, "/occmask/path: PosesInFrame in world ending at the current odometry pose", bad.slice(0, 3).join("; ") || `${paths.length} paths, last with ${prevLen} poses`);
   }
 
+  // --- Point clouds (opt-in): one per colour image at its stamp, in a frame of the transform
+  // tree, x/y/z float32 and red/green/blue/alpha uint8 inside the stride, finite points in front
+  // of the camera.
+  if (byTopic.has("/occmask/points")) {
+    const clouds = messages.get("/occmask/points") ?? [];
+    const maskStamps = new Set((messages.get("/occmask/mask") ?? []).map(({ msg }) => nsOf(msg.timestamp)));
+    const bad = [];
+    let points = 0;
+    for (const { msg } of clouds) {
+      const fields = new Map((msg.fields ?? []).map((f) => [f.name, f]));
+      const want = { x: NUMERIC.FLOAT32, y: NUMERIC.FLOAT32, z: NUMERIC.FLOAT32, red: NUMERIC.UINT8, green: NUMERIC.UINT8, blue: NUMERIC.UINT8, alpha: NUMERIC.UINT8 };
+      for (const [name, type] of Object.entries(want)) {
+        const f = fields.get(name);
+        const size = type === NUMERIC.FLOAT32 ? 4 : 1;
+        if (!f || f.type !== type || f.offset + size > msg.point_stride) bad.push(`field ${name}: ${JSON.stringify(f)}`);
+      }
+      if (!knownFrame(msg.frame_id)) bad.push(`frame ${msg.frame_id} not in the transform tree`);
+      if (!maskStamps.has(nsOf(msg.timestamp))) bad.push(`cloud at ${nsOf(msg.timestamp)} ns has no mask at that stamp`);
+      const data = msg.data ?? new Uint8Array();
+      if (msg.point_stride <= 0 || data.length % msg.point_stride !== 0) bad.push(`${data.length} bytes, stride ${msg.point_stride}`);
+      const view = new DataView(data.buffer, data.byteOffset, data.byteLength);
+      const [fx, fy, fz] = ["x", "y", "z"].map((n) => fields.get(n)?.offset ?? 0);
+      for (let o = 0; msg.point_stride > 0 && o + msg.point_stride <= data.length; o += msg.point_stride) {
+        const [x, y, z] = [fx, fy, fz].map((f) => view.getFloat32(o + f, true));
+        if (!finite(x, y, z) || !(z > 0)) {
+          bad.push(`point (${x}, ${y}, ${z})`);
+          break;
+        }
+        points += 1;
+      }
+      if (bad.length > 3) break;
+    }
+    report.check(
+      clouds.length > 0 && clouds.length === maskStamps.size && bad.length === 0,
+      "/occmask/points: PointCloud per colour image at its stamp, in the transform tree, xyz float32 + rgba uint8 fields, finite points in front of the camera",
+      bad.slice(0, 3).join("; ") || `${clouds.length} clouds, ${points} points, frame ${clouds[0]?.msg.frame_id}`,
+    );
+  }
+
   // --- 3D panel and plot topics.
   if (scene) {
     const [id, config] = scene;
     for (const topic of Object.keys(config.topics ?? {})) {
-      if (topic === "/groundtruth/pose" && !byTopic.has(topic)) continue;
+      if (OPTIONAL_TOPICS.has(topic) && !byTopic.has(topic)) continue;
       requireTopic(id, topic, THREE_D_TOPIC_SCHEMAS, "topic");
     }
     report.check(knownFrame(config.followTf ?? "world"), `${id}: display frame ${config.followTf} is in the transform tree`);

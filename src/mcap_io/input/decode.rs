@@ -7,7 +7,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use crate::error::{Error, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::geometry::distortion::{CameraModel, LensDistortion};
-use crate::image_buf::{DepthMeters, GrayF32, ImageSize, LUMA_WEIGHTS_BT601};
+use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8, LUMA_WEIGHTS_BT601};
 use crate::mcap_io::codec::decode_compressed_pixels;
 use crate::mcap_io::encoding::{
     ColorEncoding, ColorFormat, CompressedDepthFormat, DepthCodec, DepthEncoding,
@@ -786,10 +786,7 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
                     }
                     return Ok(());
                 }
-                ColorEncoding::Rgb8 | ColorEncoding::Rgba8 => [0, 1, 2],
-                ColorEncoding::Bgr8 | ColorEncoding::Bgra8 => [2, 1, 0],
-                // Grey images use one channel three times.
-                ColorEncoding::Mono8 => [0, 0, 0],
+                interleaved => interleaved_rgb_offsets(interleaved).unwrap_or([0, 0, 0]),
             };
             let [r, g, b] = rgb_offsets;
             for y in 0..size.height {
@@ -804,15 +801,8 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
             Ok(())
         }
         ImagePayload::Compressed { format, data } => {
-            let Some(color_format) = ColorFormat::from_transport_format(format) else {
-                return Err(unsupported(topic, "colour", format, SUPPORTED_COLOR_ENCODINGS));
-            };
-            let decoded = decode_compressed_pixels(
-                data,
-                color_format.image_format(),
-                topic,
-                &format!("{format} image"),
-            )?;
+            let image_format = color_image_format(topic, format)?;
+            let decoded = decode_compressed_pixels(data, image_format, topic, &format!("{format} image"))?;
             let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
             resize_for(gray, size);
             if decoded.color().channel_count() <= 2 {
@@ -825,6 +815,102 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
                 for (out, px) in gray.as_mut_slice().iter_mut().zip(rgb.as_raw().chunks_exact(3)) {
                     *out = wr * f32::from(px[0]) + wg * f32::from(px[1]) + wb * f32::from(px[2]);
                 }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// The PNG or JPEG format of a compressed colour image's `format` string.
+fn color_image_format(topic: &str, format: &str) -> Result<image::ImageFormat> {
+    ColorFormat::from_transport_format(format)
+        .map(ColorFormat::image_format)
+        .ok_or_else(|| unsupported(topic, "colour", format, SUPPORTED_COLOR_ENCODINGS))
+}
+
+/// Offsets of red, green and blue in an interleaved pixel of `color` (`None` for the packed
+/// and mosaic encodings); grey images use their one channel three times.
+fn interleaved_rgb_offsets(color: ColorEncoding) -> Option<[usize; 3]> {
+    match color {
+        ColorEncoding::Rgb8 | ColorEncoding::Rgba8 => Some([0, 1, 2]),
+        ColorEncoding::Bgr8 | ColorEncoding::Bgra8 => Some([2, 1, 0]),
+        ColorEncoding::Mono8 => Some([0, 0, 0]),
+        ColorEncoding::Uyvy | ColorEncoding::Yuyv | ColorEncoding::Bayer8(_) => None,
+    }
+}
+
+/// Decodes a colour (or grey) image into `rgb` (grey repeated in the three channels; YUV
+/// 4:2:2 through BT.601; Bayer mosaics demosaiced as for grey), resizing `rgb` when the size
+/// differs. The same encodings as [`gray_from_image_into`].
+///
+/// # Errors
+/// As [`gray_from_image_into`].
+pub fn rgb_from_image_into(msg: &ImageMsg, topic: &str, rgb: &mut Rgb8) -> Result<()> {
+    match &msg.payload {
+        ImagePayload::Raw {
+            width,
+            height,
+            encoding,
+            step,
+            data,
+            ..
+        } => {
+            let color: ColorEncoding = encoding
+                .parse()
+                .map_err(|_| unsupported(topic, "colour", encoding, SUPPORTED_COLOR_ENCODINGS))?;
+            let yuv = match color {
+                ColorEncoding::Uyvy => Some(true),
+                ColorEncoding::Yuyv => Some(false),
+                _ => None,
+            };
+            let bayer = match color {
+                ColorEncoding::Bayer8(filter) => Some(pixels::BayerPattern::from(filter)),
+                _ => None,
+            };
+            let bpp = color.bytes_per_pixel();
+            let [r, g, b] = interleaved_rgb_offsets(color).unwrap_or([0, 0, 0]);
+            let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
+            resize_for(rgb, size);
+            let step = *step as usize;
+            let rows: Vec<&[u8]> = (0..size.height)
+                .map(|y| &data[y * step..y * step + size.width * bpp])
+                .collect();
+            for (y, row) in rows.iter().enumerate() {
+                for (x, out) in rgb.row_mut(y).iter_mut().enumerate() {
+                    *out = match (yuv, bayer) {
+                        (Some(uyvy), _) => {
+                            let (u, v) = pixels::yuv422_chroma_offsets(x, uyvy);
+                            // The last pixel of an odd-width row has no complete pair: its
+                            // missing chroma is neutral (grey at its luma).
+                            let chroma = |i: usize| row.get(i).copied().unwrap_or(pixels::NEUTRAL_CHROMA);
+                            pixels::rgb_from_video_yuv(
+                                row[pixels::yuv422_luma_offset(x, uyvy)],
+                                chroma(u),
+                                chroma(v),
+                            )
+                        }
+                        (None, Some(pattern)) => pixels::demosaic_pixel(&rows, pattern, x, y),
+                        (None, None) => {
+                            let px = &row[x * bpp..x * bpp + bpp];
+                            [px[r], px[g], px[b]]
+                        }
+                    };
+                }
+            }
+            Ok(())
+        }
+        ImagePayload::Compressed { format, data } => {
+            let image_format = color_image_format(topic, format)?;
+            let decoded = decode_compressed_pixels(data, image_format, topic, &format!("{format} image"))?;
+            let size = ImageSize::new(decoded.width() as usize, decoded.height() as usize);
+            resize_for(rgb, size);
+            let decoded = decoded.into_rgb8();
+            for (out, px) in rgb
+                .as_mut_slice()
+                .iter_mut()
+                .zip(decoded.as_raw().chunks_exact(3))
+            {
+                *out = [px[0], px[1], px[2]];
             }
             Ok(())
         }
@@ -1042,6 +1128,51 @@ mod tests {
     }
 
     #[test]
+    fn rgb_decoding_agrees_with_the_grey_one_in_every_encoding() {
+        let mut rgb = Rgb8::filled(ImageSize::new(1, 1), [0; 3]);
+        for msg in [
+            raw("rgb8", 2, 3, vec![10, 200, 30, 255, 0, 128]),
+            raw("bgr8", 2, 3, vec![30, 200, 10, 128, 0, 255]),
+            raw("bgra8", 2, 4, vec![30, 200, 10, 9, 128, 0, 255, 9]),
+        ] {
+            rgb_from_image_into(&msg, "/c", &mut rgb).unwrap();
+            assert_eq!(rgb.as_slice(), &[[10, 200, 30], [255, 0, 128]]);
+        }
+        rgb_from_image_into(&raw("mono8", 2, 1, vec![7, 250]), "/c", &mut rgb).unwrap();
+        assert_eq!(rgb.as_slice(), &[[7; 3], [250; 3]]);
+        // UYVY: grey (chroma 128) decodes to grey with the luma's video-range level, red to red.
+        rgb_from_image_into(&raw("uyvy", 2, 2, vec![128, 235, 128, 16]), "/c", &mut rgb).unwrap();
+        assert_eq!(rgb.as_slice(), &[[255; 3], [0; 3]]);
+        rgb_from_image_into(&raw("yuyv", 2, 2, vec![82, 90, 82, 240]), "/c", &mut rgb).unwrap();
+        assert!(
+            rgb.as_slice()
+                .iter()
+                .all(|&[r, g, b]| r > 240 && g < 10 && b < 10),
+            "{rgb:?}"
+        );
+        // Every encoding the grey decoder takes, the colour one takes; the same errors.
+        let mut gray = GrayF32::filled(ImageSize::new(1, 1), 0.0);
+        for encoding in ["bayer_rggb8", "rgba8", "8UC3", "nv12"] {
+            let msg = raw(encoding, 2, 1, vec![50, 60, 70, 80, 90, 100, 110, 120]);
+            assert_eq!(
+                gray_from_image_into(&msg, "/c", &mut gray).is_ok(),
+                rgb_from_image_into(&msg, "/c", &mut rgb).is_ok(),
+                "{encoding}"
+            );
+        }
+        assert!(rgb_from_image_into(&raw("rgb8", 2, 3, vec![0; 5]), "/c", &mut rgb).is_err());
+        // An odd width: the last pixel's pair is cut short (a fuzzing finding: it indexed past
+        // the row); its chroma is neutral.
+        rgb_from_image_into(
+            &raw("uyvy", 3, 2, vec![128, 235, 128, 235, 128, 235]),
+            "/c",
+            &mut rgb,
+        )
+        .unwrap();
+        assert_eq!(rgb.as_slice()[2], [255; 3]);
+    }
+
+    #[test]
     fn depth_encodings_agree_in_metres() {
         let mm: Vec<u8> = [1500u16, 0].iter().flat_map(|v| v.to_le_bytes()).collect();
         let m: Vec<u8> = [1.5f32, f32::NAN].iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -1177,6 +1308,61 @@ mod tests {
         let mut reference = DepthMeters::filled(ImageSize::new(2, 1), 0.0);
         crate::image_buf::depth_m_from_u16_into(&[1500, 0], 1000.0, &mut reference).unwrap();
         assert_eq!(d, reference);
+    }
+
+    /// `32FC1; compressedDepth png` (compressed_depth_image_transport's float depth): a 16-bit
+    /// PNG of quantised inverse depth q = a / d + b, with ROS's defaults (quantisation 100,
+    /// 10 m range: a = 100 · 101, b = 1 − a / 10); q = 0 marks invalid depth.
+    #[test]
+    fn compressed_depth_png_32fc1_is_inverse_depth() {
+        let a = 100.0f32 * 101.0;
+        let b = 1.0 - a / 10.0;
+        let depth_m = [0.6f32, 1.5, 4.25, 9.5, f32::NAN, 0.0];
+        let q: Vec<u16> = depth_m
+            .iter()
+            .map(|&d| {
+                if d.is_finite() && d > 0.0 {
+                    (a / d + b).round() as u16
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let png_image = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(3, 2, q).unwrap();
+        let mut png = std::io::Cursor::new(Vec::new());
+        png_image.write_to(&mut png, image::ImageFormat::Png).unwrap();
+        let msg = compressed_depth("32FC1; compressedDepth png", [a, b], png.into_inner());
+        assert!(msg.is_depth());
+        let mut d = DepthMeters::filled(ImageSize::new(1, 1), 9.0);
+        // Metres already: the units flag does not scale float depth.
+        depth_from_image_into(&msg, "/d", 5000.0, &mut d).unwrap();
+        assert_eq!(d.size(), ImageSize::new(3, 2));
+        for (i, (&got, &want)) in d.as_slice().iter().zip(&depth_m).enumerate() {
+            if want.is_finite() && want > 0.0 {
+                // Half a quantisation step of inverse depth: d² / (2a), 4.5 mm at 9.5 m.
+                let bound = want * want / (2.0 * a) + 1e-6;
+                assert!(
+                    (got - want).abs() <= bound,
+                    "pixel {i}: {got} vs {want} (bound {bound})"
+                );
+            } else {
+                assert_eq!(got, 0.0, "pixel {i}");
+            }
+        }
+        // The 16-bit reading of the same bytes is raw units, not inverse depth.
+        let mut raw_units = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
+        let as_16 = ImageMsg {
+            payload: match &msg.payload {
+                ImagePayload::Compressed { data, .. } => ImagePayload::Compressed {
+                    format: "16UC1; compressedDepth png".into(),
+                    data: data.clone(),
+                },
+                ImagePayload::Raw { .. } => unreachable!(),
+            },
+            ..msg.clone()
+        };
+        depth_from_image_into(&as_16, "/d", 1000.0, &mut raw_units).unwrap();
+        assert!((raw_units.get(1, 0) - d.get(1, 0)).abs() > 1.0);
     }
 
     #[test]

@@ -161,6 +161,34 @@ pub fn gray_from_video_luma(y: u8) -> f32 {
     ((f32::from(y) - BLACK) / RANGE).clamp(0.0, 1.0)
 }
 
+/// Byte offsets of the U and V samples shared by pixel `x` in a packed YUV 4:2:2 row (see
+/// [`yuv422_luma_offset`]).
+pub fn yuv422_chroma_offsets(x: usize, uyvy: bool) -> (usize, usize) {
+    let pair = 4 * (x / 2);
+    if uyvy {
+        (pair, pair + 2)
+    } else {
+        (pair + 1, pair + 3)
+    }
+}
+
+/// Chroma of no colour (U = V = 128).
+pub const NEUTRAL_CHROMA: u8 = 128;
+
+/// RGB from BT.601 video-range YUV (the standard conversion: luma 16–235, chroma 16–240
+/// around 128).
+#[inline]
+pub fn rgb_from_video_yuv(y: u8, u: u8, v: u8) -> [u8; 3] {
+    let c = 1.164 * (f32::from(y) - 16.0);
+    let (d, e) = (f32::from(u) - 128.0, f32::from(v) - 128.0);
+    let channel = |value: f32| value.round().clamp(0.0, 255.0) as u8;
+    [
+        channel(c + 1.596 * e),
+        channel(c - 0.392 * d - 0.813 * e),
+        channel(c + 2.017 * d),
+    ]
+}
+
 /// The colour filter of a Bayer mosaic: the channel (0 = R, 1 = G, 2 = B) of the top-left
 /// 2×2 cell's four pixels in row order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
