@@ -161,6 +161,68 @@ pub enum Error {
         value: String,
     },
 
+    /// No channel of `role` could be chosen in an input file.
+    #[error(
+        "no {role} channel found{found}; supported image schemas are foxglove.RawImage/\
+         foxglove.CompressedImage (protobuf or json), sensor_msgs/msg/Image/CompressedImage (ROS 2, \
+         cdr) and sensor_msgs/Image/CompressedImage (ROS 1, ros1); {channels} ({})",
+        path.display()
+    )]
+    NoTopic {
+        /// The input file.
+        path: PathBuf,
+        /// What the channel was for.
+        role: TopicRole,
+        /// What was found instead (empty, or e.g. " among the image topics (…)").
+        found: String,
+        /// Every channel of the file, as `topic (schema, encoding)`.
+        channels: String,
+    },
+
+    /// Several channels could be the one for `role`.
+    #[error("several {role} topics: {} ({})", candidates.join(", "), path.display())]
+    AmbiguousTopic {
+        /// The input file.
+        path: PathBuf,
+        /// What the channel is for.
+        role: TopicRole,
+        /// The candidates' topics.
+        candidates: Vec<String>,
+    },
+
+    /// A topic given for `role` is not in the file.
+    #[error("{role} topic {topic}: no such topic; {channels} ({})", path.display())]
+    UnknownTopic {
+        /// The input file.
+        path: PathBuf,
+        /// What the topic was given for.
+        role: TopicRole,
+        /// The topic given.
+        topic: String,
+        /// Every channel of the file, as `topic (schema, encoding)`.
+        channels: String,
+    },
+
+    /// A topic given for `role` has a schema that cannot serve it.
+    #[error(
+        "{role} topic {topic}: schema {schema:?} with message encoding {message_encoding:?} is not \
+         supported here (expected {} as Foxglove protobuf/json, ROS 2 cdr or ROS 1) ({})",
+        role.expected_messages(),
+        path.display()
+    )]
+    UnsupportedTopic {
+        /// The input file.
+        path: PathBuf,
+        /// What the topic was given for.
+        role: TopicRole,
+        /// The topic given.
+        topic: String,
+        /// Its schema name.
+        schema: String,
+        /// Its message encoding.
+        message_encoding: String,
+    },
+
     /// External poses were asked for without a topic to read them from.
     #[error("external poses need a pose topic to read them from")]
     MissingPoseTopic,
@@ -285,6 +347,37 @@ pub enum RegistrationNeed {
         /// The depth images' size.
         image: ImageSize,
     },
+}
+
+/// What an input channel is chosen for ([`Error::NoTopic`] and the other topic errors).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum TopicRole {
+    /// Colour images.
+    #[error("colour image")]
+    Color,
+    /// Depth images.
+    #[error("depth image")]
+    Depth,
+    /// The colour camera's calibration.
+    #[error("camera calibration")]
+    Calibration,
+    /// The depth camera's calibration.
+    #[error("depth camera calibration")]
+    DepthCalibration,
+    /// External poses.
+    #[error("pose")]
+    Poses,
+}
+
+impl TopicRole {
+    /// The message types a channel for this role may hold.
+    pub const fn expected_messages(self) -> &'static str {
+        match self {
+            TopicRole::Color | TopicRole::Depth => "a raw or compressed image",
+            TopicRole::Calibration | TopicRole::DepthCalibration => "a camera calibration",
+            TopicRole::Poses => "a pose in frame, frame transform or frame transforms",
+        }
+    }
 }
 
 /// What a pose channel was read for ([`Error::NoPoses`]).

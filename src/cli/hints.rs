@@ -1,17 +1,26 @@
 //! The command-line flag that fixes a library error. The library's messages state what was
 //! expected and found without naming flags; the CLI appends the flag from the error's variant.
 
-use occmask::error::{PoseRole, RegistrationNeed};
+use std::borrow::Cow;
+
+use occmask::error::{PoseRole, RegistrationNeed, TopicRole};
 use occmask::Error;
 
 /// What to pass (or check) on the command line for `error`, if a flag fixes it.
-pub fn flag_hint(error: &Error) -> Option<&'static str> {
-    Some(match error {
+pub fn flag_hint(error: &Error) -> Option<Cow<'static, str>> {
+    Some(Cow::Borrowed(match error {
         Error::MissingCalibration { .. } => {
             "pass --camera FX,FY,CX,CY (or a preset such as fr2) or --camera-info-topic TOPIC"
         }
         Error::CalibrationSize { .. } => "pass --camera FX,FY,CX,CY for the image size",
         Error::BadDepthUnits { .. } => "pass --depth-units-per-meter",
+        Error::NoTopic { role, .. } => return Some(format!("pass {}", topic_flag(*role)).into()),
+        Error::AmbiguousTopic { role, .. } => {
+            return Some(format!("choose one with {}", topic_flag(*role)).into())
+        }
+        Error::UnknownTopic { role, .. } | Error::UnsupportedTopic { role, .. } => {
+            return Some(format!("check {}", topic_flag(*role)).into())
+        }
         Error::MissingPoseTopic => "pass --pose-topic",
         Error::NoPoses {
             role: PoseRole::External,
@@ -41,7 +50,18 @@ pub fn flag_hint(error: &Error) -> Option<&'static str> {
              --depth-aligned if the depth is already registered to colour"
         }
         _ => return None,
-    })
+    }))
+}
+
+/// The flag that names the topic for `role`.
+fn topic_flag(role: TopicRole) -> &'static str {
+    match role {
+        TopicRole::Color => "--rgb-topic",
+        TopicRole::Depth => "--depth-topic",
+        TopicRole::Calibration => "--camera-info-topic",
+        TopicRole::DepthCalibration => "--depth-camera-info-topic",
+        TopicRole::Poses => "--pose-topic",
+    }
 }
 
 /// `error` with the flag that fixes it appended to its message (`error: … ; pass --…`), when

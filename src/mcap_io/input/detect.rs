@@ -4,9 +4,9 @@
 //! their first message (`16UC1`/`mono16`/`32FC1`/compressedDepth = depth, anything else =
 //! colour). Topics under `/occmask/` (our own outputs) and `/groundtruth/` are never chosen
 //! automatically. Ties are broken by the usual names (`color`/`rgb`, `aligned`), and otherwise
-//! reported with the candidates and the flag that settles them.
+//! reported with the candidates ([`Error::AmbiguousTopic`]).
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, TopicRole};
 
 use super::decode::{decode_image, MessageType};
 use super::{InputChannel, McapInput};
@@ -73,37 +73,26 @@ pub fn describe_channels(input: &McapInput) -> String {
     format!("topics seen: {}", list.join(", "))
 }
 
-fn no_rgbd(input: &McapInput, what: &str) -> Error {
-    Error::Dataset {
-        path: input.path().to_owned(),
-        message: format!(
-            "{what}; supported image schemas are foxglove.RawImage/foxglove.CompressedImage \
-             (protobuf or json), sensor_msgs/msg/Image/CompressedImage (ROS 2, cdr) and \
-             sensor_msgs/Image/CompressedImage (ROS 1, ros1); {}",
-            describe_channels(input)
-        ),
-    }
-}
-
 fn by_topic<'a>(
     input: &'a McapInput,
     topic: &str,
-    flag: &str,
+    role: TopicRole,
     want: &[MessageType],
 ) -> Result<&'a InputChannel> {
-    let channel = input.channel_by_topic(topic).ok_or_else(|| Error::Dataset {
+    let channel = input.channel_by_topic(topic).ok_or_else(|| Error::UnknownTopic {
         path: input.path().to_owned(),
-        message: format!("{flag} {topic}: no such topic; {}", describe_channels(input)),
+        role,
+        topic: topic.to_owned(),
+        channels: describe_channels(input),
     })?;
     match channel.channel_type {
         Some(ct) if want.contains(&ct.message) => Ok(channel),
-        _ => Err(Error::Dataset {
+        _ => Err(Error::UnsupportedTopic {
             path: input.path().to_owned(),
-            message: format!(
-                "{flag} {topic}: schema {:?} with message encoding {:?} is not supported here \
-                 (expected one of {want:?} as Foxglove protobuf/json, ROS 2 cdr or ROS 1)",
-                channel.schema_name, channel.message_encoding
-            ),
+            role,
+            topic: topic.to_owned(),
+            schema: channel.schema_name.clone(),
+            message_encoding: channel.message_encoding.clone(),
         }),
     }
 }
@@ -112,8 +101,7 @@ fn pick<'a>(
     input: &McapInput,
     candidates: Vec<&'a InputChannel>,
     preferred: &[&str],
-    what: &str,
-    flag: &str,
+    role: TopicRole,
 ) -> Result<Option<&'a InputChannel>> {
     if candidates.len() <= 1 {
         return Ok(candidates.into_iter().next());
@@ -125,22 +113,28 @@ fn pick<'a>(
             return Ok(Some(matching[0]));
         }
     }
-    let names: Vec<&str> = candidates.iter().map(|c| c.topic.as_str()).collect();
-    Err(Error::Dataset {
+    Err(Error::AmbiguousTopic {
         path: input.path().to_owned(),
-        message: format!(
-            "several {what} topics: {}; choose one with {flag}",
-            names.join(", ")
-        ),
+        role,
+        candidates: candidates.iter().map(|c| c.topic.clone()).collect(),
     })
+}
+
+fn no_topic(input: &McapInput, role: TopicRole, found: String) -> Error {
+    Error::NoTopic {
+        path: input.path().to_owned(),
+        role,
+        found,
+        channels: describe_channels(input),
+    }
 }
 
 /// Chooses the channels to process.
 ///
 /// # Errors
-/// [`Error::Dataset`] when no colour or depth channel is found (listing every topic and
-/// schema), when a given topic does not exist or has an unsupported schema, or when several
-/// candidates remain (naming the flag to choose).
+/// [`Error::NoTopic`] when no colour or depth channel is found (listing every topic and
+/// schema), [`Error::UnknownTopic`] / [`Error::UnsupportedTopic`] when a given topic does not
+/// exist or has an unsupported schema, [`Error::AmbiguousTopic`] when several candidates remain.
 pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<RgbdTopics> {
     let images = [MessageType::RawImage, MessageType::CompressedImage];
     let mut colors = Vec::new();
@@ -169,24 +163,17 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
         }
     }
     let color = match &overrides.rgb {
-        Some(t) => by_topic(input, t, "--rgb-topic", &images)?,
-        None => pick(
-            input,
-            colors,
-            &["color", "colour", "rgb"],
-            "colour image",
-            "--rgb-topic",
-        )?
-        .ok_or_else(|| no_rgbd(input, "no colour image channel found (pass --rgb-topic)"))?,
+        Some(t) => by_topic(input, t, TopicRole::Color, &images)?,
+        None => pick(input, colors, &["color", "colour", "rgb"], TopicRole::Color)?
+            .ok_or_else(|| no_topic(input, TopicRole::Color, String::new()))?,
     };
     let depth = match &overrides.depth {
-        Some(t) => by_topic(input, t, "--depth-topic", &images)?,
+        Some(t) => by_topic(input, t, TopicRole::Depth, &images)?,
         None => pick(
             input,
             depths,
             &["aligned", "registered", "depth"],
-            "depth image",
-            "--depth-topic",
+            TopicRole::Depth,
         )?
         .ok_or_else(|| {
             let found = if image_encodings.is_empty() {
@@ -194,12 +181,10 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
             } else {
                 format!(" among the image topics ({})", image_encodings.join(", "))
             };
-            no_rgbd(
+            no_topic(
                 input,
-                &format!(
-                    "no depth image channel (16UC1, mono16 or 32FC1; 8-bit depth is not supported) \
-                     found{found} (pass --depth-topic)"
-                ),
+                TopicRole::Depth,
+                format!(" (16UC1, mono16 or 32FC1; 8-bit depth is not supported){found}"),
             )
         })?,
     };
@@ -222,7 +207,7 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
         Some(t) => Some(by_topic(
             input,
             t,
-            "--camera-info-topic",
+            TopicRole::Calibration,
             &[MessageType::Calibration],
         )?),
         None => same_ns(&color.topic)
@@ -233,7 +218,7 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
         Some(t) => Some(by_topic(
             input,
             t,
-            "--depth-camera-info-topic",
+            TopicRole::DepthCalibration,
             &[MessageType::Calibration],
         )?),
         None => same_ns(&depth.topic).filter(|c| calibration.is_none_or(|colour| colour.id != c.id)),
@@ -242,7 +227,7 @@ pub fn detect_topics(input: &McapInput, overrides: &TopicOverrides) -> Result<Rg
         Some(t) => Some(by_topic(
             input,
             t,
-            "--pose-topic",
+            TopicRole::Poses,
             &[
                 MessageType::PoseInFrame,
                 MessageType::FrameTransform,
