@@ -502,30 +502,57 @@ mod tests {
     /// What a run emits: per frame its index, stamp, pose and mask.
     type Emitted = Vec<(u64, u64, Isometry3<f64>, Mask)>;
 
-    /// The closed loop, offline, over `frames` frames of a crossing box at 160×120 with short
-    /// blocks (so that several backward passes and a partial last block occur), on a pool of
-    /// `threads` threads.
-    fn run(threads: usize, frames: usize, offline: OfflineConfig) -> Emitted {
-        let size = ImageSize::new(160, 120);
+    const SIZE: ImageSize = ImageSize::new(160, 120);
+
+    /// Short blocks, so that several backward passes and a partial last block occur.
+    fn short_blocks() -> OfflineConfig {
+        OfflineConfig {
+            block_frames: 7,
+            lookahead_frames: 4,
+            ..OfflineConfig::default()
+        }
+    }
+
+    /// `frames` frames of `scenario` at 160×120 and a closed-loop offline processor for them.
+    fn setup(scenario: Scenario, frames: usize) -> (SyntheticSequence, OfflineProcessor) {
         let sequence = SyntheticSequence::new(
-            Scenario::TwoObjectsCrossing,
+            scenario,
             SequenceConfig {
-                size,
+                size: SIZE,
                 frame_count: Some(frames),
                 ..SequenceConfig::default()
             },
         );
         let config = ProcessorConfig {
-            offline,
+            offline: short_blocks(),
             ..ProcessorConfig::default()
         };
+        let processor =
+            OfflineProcessor::new(SIZE, sequence.config.intrinsics(), config).expect("valid config");
+        (sequence, processor)
+    }
+
+    /// Pushes frame `i` of `sequence`.
+    fn push(processor: &mut OfflineProcessor, sequence: &SyntheticSequence, i: usize, emit: &mut Emit<'_>) {
+        let frame = sequence.frame(i);
+        let input = FrameInput {
+            timestamp_ns: frame.timestamp_ns,
+            gray: &frame.gray,
+            depth_m: &frame.depth_m,
+            world_from_marker: None,
+            ignore_in_previous: None,
+        };
+        processor.push(&input, emit).expect("push");
+    }
+
+    /// Two crossing boxes, offline, on a pool of `threads` threads.
+    fn run(threads: usize, frames: usize) -> Emitted {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .expect("a test pool");
         pool.install(|| {
-            let mut processor =
-                OfflineProcessor::new(size, sequence.config.intrinsics(), config).expect("valid config");
+            let (sequence, mut processor) = setup(Scenario::TwoObjectsCrossing, frames);
             let mut emitted = Emitted::new();
             let mut keep = |out: FrameOutput<'_>| {
                 emitted.push((
@@ -537,19 +564,7 @@ mod tests {
                 Ok(())
             };
             for i in 0..frames {
-                let frame = sequence.frame(i);
-                processor
-                    .push(
-                        &FrameInput {
-                            timestamp_ns: frame.timestamp_ns,
-                            gray: &frame.gray,
-                            depth_m: &frame.depth_m,
-                            world_from_marker: None,
-                            ignore_in_previous: None,
-                        },
-                        &mut keep,
-                    )
-                    .expect("push");
+                push(&mut processor, &sequence, i, &mut keep);
             }
             processor.finish(&mut keep).expect("finish");
             assert_eq!(processor.pending_frames(), 0);
@@ -557,19 +572,11 @@ mod tests {
         })
     }
 
-    fn short_blocks() -> OfflineConfig {
-        OfflineConfig {
-            block_frames: 7,
-            lookahead_frames: 4,
-            ..OfflineConfig::default()
-        }
-    }
-
     #[test]
     fn passes_side_by_side_give_the_results_of_one_thread() {
         let frames = 40;
-        let one = run(1, frames, short_blocks());
-        let two = run(2, frames, short_blocks());
+        let one = run(1, frames);
+        let two = run(2, frames);
         // Every frame once, in order.
         let indices: Vec<u64> = one.iter().map(|e| e.0).collect();
         assert_eq!(indices, (0..frames as u64).collect::<Vec<_>>());
@@ -588,44 +595,16 @@ mod tests {
         // Results lag by at most a block and its look-ahead, and nothing is emitted before the
         // first backward pass.
         let config = short_blocks();
-        let size = ImageSize::new(160, 120);
-        let sequence = SyntheticSequence::new(
-            Scenario::StaticScene,
-            SequenceConfig {
-                size,
-                frame_count: Some(30),
-                ..SequenceConfig::default()
-            },
-        );
-        let mut processor = OfflineProcessor::new(
-            size,
-            sequence.config.intrinsics(),
-            ProcessorConfig {
-                offline: config,
-                ..ProcessorConfig::default()
-            },
-        )
-        .expect("valid config");
+        let frames = 30;
+        let (sequence, mut processor) = setup(Scenario::StaticScene, frames);
         let window = config.block_frames + config.lookahead_frames;
         let mut emitted = 0usize;
-        for i in 0..30 {
-            let frame = sequence.frame(i);
+        for i in 0..frames {
             let mut count = |_: FrameOutput<'_>| {
                 emitted += 1;
                 Ok(())
             };
-            processor
-                .push(
-                    &FrameInput {
-                        timestamp_ns: frame.timestamp_ns,
-                        gray: &frame.gray,
-                        depth_m: &frame.depth_m,
-                        world_from_marker: None,
-                        ignore_in_previous: None,
-                    },
-                    &mut count,
-                )
-                .expect("push");
+            push(&mut processor, &sequence, i, &mut count);
             let pushed = i + 1;
             if pushed <= window {
                 assert_eq!(emitted, 0, "after {pushed} frames");

@@ -754,11 +754,8 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
             data,
             ..
         } => {
-            let color: ColorEncoding = encoding
-                .parse()
-                .map_err(|_| unsupported(topic, "colour", encoding, SUPPORTED_COLOR_ENCODINGS))?;
+            let (color, size) = raw_color(topic, *width, *height, encoding, *step, data)?;
             let bpp = color.bytes_per_pixel();
-            let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
             resize_for(gray, size);
             let step = *step as usize;
             let row = |y: usize| &data[y * step..y * step + size.width * bpp];
@@ -821,6 +818,22 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
     }
 }
 
+/// A raw colour image's encoding and size, checked against its row length and bytes.
+fn raw_color(
+    topic: &str,
+    width: u32,
+    height: u32,
+    encoding: &str,
+    step: u32,
+    data: &[u8],
+) -> Result<(ColorEncoding, ImageSize)> {
+    let color: ColorEncoding = encoding
+        .parse()
+        .map_err(|_| unsupported(topic, "colour", encoding, SUPPORTED_COLOR_ENCODINGS))?;
+    let size = raw_rows(topic, width, height, step, color.bytes_per_pixel(), data.len())?;
+    Ok((color, size))
+}
+
 /// The PNG or JPEG format of a compressed colour image's `format` string.
 fn color_image_format(topic: &str, format: &str) -> Result<image::ImageFormat> {
     ColorFormat::from_transport_format(format)
@@ -855,9 +868,7 @@ pub fn rgb_from_image_into(msg: &ImageMsg, topic: &str, rgb: &mut Rgb8) -> Resul
             data,
             ..
         } => {
-            let color: ColorEncoding = encoding
-                .parse()
-                .map_err(|_| unsupported(topic, "colour", encoding, SUPPORTED_COLOR_ENCODINGS))?;
+            let (color, size) = raw_color(topic, *width, *height, encoding, *step, data)?;
             let yuv = match color {
                 ColorEncoding::Uyvy => Some(true),
                 ColorEncoding::Yuyv => Some(false),
@@ -869,7 +880,6 @@ pub fn rgb_from_image_into(msg: &ImageMsg, topic: &str, rgb: &mut Rgb8) -> Resul
             };
             let bpp = color.bytes_per_pixel();
             let [r, g, b] = interleaved_rgb_offsets(color).unwrap_or([0, 0, 0]);
-            let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
             resize_for(rgb, size);
             let step = *step as usize;
             let rows: Vec<&[u8]> = (0..size.height)
