@@ -136,7 +136,6 @@ pub type Emit<'e> = dyn FnMut(FrameOutput<'_>) -> Result<()> + Send + 'e;
 /// other; only the time differs (on one thread, `join` runs them in turn).
 pub struct OfflineProcessor {
     config: OfflineConfig,
-    size: ImageSize,
     first: FirstPass,
     later: LaterPasses,
 }
@@ -227,7 +226,6 @@ impl OfflineProcessor {
         };
         Ok(Self {
             config: offline,
-            size,
             first: FirstPass {
                 processor: first,
                 source: config.pose_source,
@@ -264,9 +262,10 @@ impl OfflineProcessor {
     /// # Errors
     /// As [`Processor::process`], and whatever `emit` returns.
     pub fn push(&mut self, frame: &FrameInput<'_>, emit: &mut Emit<'_>) -> Result<()> {
-        check_size("gray image", frame.gray.size(), self.size)?;
-        check_size("depth image", frame.depth_m.size(), self.size)?;
-        let mut buffered = self.later.spare.pop().unwrap_or_else(|| Buffered::new(self.size));
+        let size = self.later.size;
+        check_size("gray image", frame.gray.size(), size)?;
+        check_size("depth image", frame.depth_m.size(), size)?;
+        let mut buffered = self.later.spare.pop().unwrap_or_else(|| Buffered::new(size));
         let (first, later, config) = (&mut self.first, &mut self.later, &self.config);
         let (first_done, later_done) = rayon::join(
             || first.run(frame, &mut buffered),
