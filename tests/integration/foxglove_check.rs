@@ -110,7 +110,8 @@ fn demo_output_passes_the_foxglove_check_and_a_wrong_layout_fails_it() {
 }
 
 /// Real data through `convert` and `process --points`: a static scene (empty annotations), real
-/// stamps, the point clouds in the 3D panel.
+/// stamps, the point clouds in the 3D panel in their own colours; a layout without the clouds'
+/// colour field (Foxglove then replaces the colour mode) fails.
 #[test]
 fn processed_tum_output_passes_the_foxglove_check() {
     let Some(script) = check_script() else { return };
@@ -141,7 +142,23 @@ fn processed_tum_output_passes_the_foxglove_check() {
         "ok   timeline from the chunk indexes equals the messages' time range",
         "ok   /occmask/points: PointCloud per colour image",
         "ok   3D!occmask-scene: topic /occmask/points is in the file",
+        "ok   3D!occmask-scene: /occmask/points colour mode rgba-fields beside a colorField",
     ] {
         assert!(stdout.contains(expected), "{expected}\n{stdout}");
     }
+
+    let mut layout: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(repo().join("foxglove/occmask-layout.json")).unwrap())
+            .unwrap();
+    let points = &mut layout["configById"]["3D!occmask-scene"]["topics"]["/occmask/points"];
+    points.as_object_mut().unwrap().remove("colorField");
+    let bad_layout = dir.path().join("bad-layout.json");
+    std::fs::write(&bad_layout, layout.to_string()).unwrap();
+    let out = run_check(&script, &processed, Some(&bad_layout));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert!(
+        stdout.contains("FAIL 3D!occmask-scene: /occmask/points colour mode rgba-fields"),
+        "{stdout}"
+    );
 }

@@ -97,9 +97,11 @@ fn layout_panels_show_topics_we_write() {
     assert_eq!(depth["colorMap"], "turbo");
     assert_eq!(depth["maxValue"], 30000);
     // The 3D panel shows the points in their own colours (the moving ones tinted) beside both
-    // trajectories.
+    // trajectories. The colour field is set too: without one, Foxglove picks the field and the
+    // colour mode itself on the first message (Studio 1.48: a colour map of x).
     let scene = &configs["3D!occmask-scene"]["topics"];
     assert_eq!(scene[TOPIC_POINTS]["colorMode"], "rgba-fields");
+    assert_eq!(scene[TOPIC_POINTS]["colorField"], "red");
     for topic in [TOPIC_PATH, TOPIC_ODOMETRY, TOPIC_GROUNDTRUTH_POSE] {
         assert_eq!(scene[topic]["visible"], true, "{topic}");
     }

@@ -574,6 +574,21 @@ async function main(argv) {
       "/occmask/points: PointCloud per colour image at its stamp, in the transform tree, xyz float32 + rgba uint8 fields, finite points in front of the camera",
       bad.slice(0, 3).join("; ") || `${clouds.length} clouds, ${points} points, frame ${clouds[0]?.msg.frame_id}`,
     );
+    // The 3D panel's colours. On a topic's first message Foxglove fills in a missing colorField
+    // and with it replaces the colour mode (Studio 1.48: a colour map of the first field, x, for
+    // this cloud), so a colour mode holds only beside a colorField of the cloud; "rgba-fields"
+    // reads the red, green, blue and alpha fields.
+    const pointsConfig = scene?.[1].topics?.["/occmask/points"];
+    if (pointsConfig?.colorMode !== undefined) {
+      const names = new Set((clouds[0]?.msg.fields ?? []).map((f) => f.name));
+      const { colorMode, colorField } = pointsConfig;
+      const rgbaFields = ["red", "green", "blue", "alpha"].every((n) => names.has(n));
+      report.check(
+        names.has(colorField) && (colorMode !== "rgba-fields" || rgbaFields),
+        `${scene[0]}: /occmask/points colour mode ${colorMode} beside a colorField of the cloud (without one Foxglove picks its own mode)`,
+        `colorField ${colorField}, fields ${[...names].join(", ")}`,
+      );
+    }
   }
 
   // --- 3D panel and plot topics.

@@ -5,9 +5,12 @@
 //
 //   node screenshots.js --mcap FILE --layout LAYOUT.json --out PREFIX [--times 1,2.5] [--compat]
 //       [--width 1280] [--height 800] [--wait-ms 15000] [--chromium /usr/bin/chromium]
+//       [--panel ID] [--camera JSON]
 //
 // Writes PREFIX-<seconds>s.png (seconds after the file's first message). --compat rewrites the
-// Image panels for Studio 1.48 (see www/main.js). Needs `npm ci` here and in .. (for @mcap/core).
+// Image panels for Studio 1.48 (see www/main.js); --panel shows only the layout's panel ID (e.g.
+// 3D!occmask-scene), with its configuration unchanged; --camera '{"distance":5}' moves the 3D
+// panels' view (fields of their cameraState). Needs `npm ci` here and in .. (for @mcap/core).
 "use strict";
 
 const fs = require("fs");
@@ -56,6 +59,8 @@ async function main() {
   const height = Number(option(args, "height", "800"));
   const waitMs = Number(option(args, "wait-ms", "15000"));
   const compat = args.includes("--compat");
+  const panel = option(args, "panel", undefined);
+  const camera = option(args, "camera", undefined);
   const executablePath = option(args, "chromium", "/usr/bin/chromium");
 
   const start = await firstMessageNs(mcap);
@@ -88,6 +93,8 @@ async function main() {
       const url = new URL(`http://127.0.0.1:${PORT}/index.html`);
       url.searchParams.set("layout", `/layout/${path.basename(layout)}`);
       if (compat) url.searchParams.set("compat", "1");
+      if (panel) url.searchParams.set("panel", panel);
+      if (camera) url.searchParams.set("camera", camera);
       url.searchParams.set("ds", "remote-file");
       url.searchParams.set("ds.url", `http://127.0.0.1:${PORT}/data/${path.basename(mcap)}`);
       url.searchParams.set("time", rfc3339(at));

@@ -54,6 +54,15 @@ function toStudio148(layout) {
   };
   let layoutData = await (await fetch(params.get("layout"))).json();
   if (params.get("compat") === "1") layoutData = toStudio148(layoutData);
+  // `panel=ID`: that panel of the layout alone fills the window; `camera={...}` moves the 3D
+  // panels' view (cameraState fields, as a user orbits), the rest of their configuration unchanged.
+  if (params.get("panel")) layoutData = { ...layoutData, layout: params.get("panel") };
+  if (params.get("camera")) {
+    for (const [id, config] of Object.entries(layoutData.configById)) {
+      if (!id.startsWith("3D!")) continue;
+      config.cameraState = { ...config.cameraState, ...JSON.parse(params.get("camera")) };
+    }
+  }
   window.occmaskLayout = layoutData;
   const now = new Date().toISOString();
   const layouts = new Map([
