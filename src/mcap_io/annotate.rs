@@ -24,6 +24,7 @@
 //! | [`TOPIC_ODOMETRY`] | `foxglove.PoseInFrame` in [`FRAME_WORLD`] |
 //! | `/tf` (or [`TOPIC_TF_FALLBACK`]) | `foxglove.FrameTransform` world → [`FRAME_CAMERA_ESTIMATED`] |
 //! | [`TOPIC_PATH`] | `foxglove.PosesInFrame`, throttled trajectory so far |
+//! | [`TOPIC_ANCHOR_PATH`] | `foxglove.PosesInFrame`, the anchor pose channel's trajectory at the frames, throttled (when anchored) |
 //! | [`TOPIC_ACCUMULATION`] | `foxglove.RawImage` `32FC1` accumulation map (opt-in) |
 //! | [`TOPIC_POINTS`] | `foxglove.PointCloud` in [`FRAME_CAMERA_ESTIMATED`], moving points tinted (opt-in; [`crate::point_cloud`]) |
 //! | [`TOPIC_STATS`] | JSON, schema `schemas/occmask.FrameStats.json` |
@@ -60,6 +61,9 @@ pub const TOPIC_MASK_ANNOTATIONS: &str = "/occmask/mask_annotations";
 pub const TOPIC_ODOMETRY: &str = "/occmask/odometry";
 /// Estimated trajectory so far (throttled).
 pub const TOPIC_PATH: &str = "/occmask/path";
+/// The anchor pose channel's trajectory (the ground truth of a converted dataset) at the
+/// processed frames, so far (throttled): drawn beside [`TOPIC_PATH`] in the same frame.
+pub const TOPIC_ANCHOR_PATH: &str = "/occmask/anchor_path";
 /// Accumulation map (opt-in).
 pub const TOPIC_ACCUMULATION: &str = "/occmask/accumulation";
 /// Downsampled coloured points of each frame (opt-in).
@@ -192,6 +196,9 @@ pub struct FrameAnnotation<'a> {
     pub mask: &'a Mask,
     /// Estimated pose.
     pub world_from_camera: &'a Isometry3<f64>,
+    /// The anchor channel's pose at this frame, when the trajectory is anchored and the channel
+    /// covers the frame (written with [`AnnotatedWriter::add_anchor_path`]).
+    pub anchor_pose: Option<&'a Isometry3<f64>>,
     /// Accumulation map, written when enabled.
     pub accumulation: Option<&'a Image<f32>>,
     /// Packed points ([`crate::point_cloud`]'s layout) in the camera's frame, written when
@@ -207,6 +214,7 @@ struct NewChannels {
     odometry: u16,
     tf: u16,
     path: u16,
+    anchor_path: Option<u16>,
     accumulation: Option<u16>,
     points: Option<u16>,
     stats: u16,
@@ -218,16 +226,71 @@ pub struct AnnotatedWriter<W: Write + Seek> {
     channels: NewChannels,
     sequences: HashMap<u16, u32>,
     contours: ContourOptions,
-    path: Vec<foxglove::messages::Pose>,
-    path_stride: usize,
-    path_frames_seen: usize,
-    last_path_publish_ns: Option<u64>,
+    path: PathTrail,
+    anchor_path: PathTrail,
     copied_messages: u64,
     new_messages: u64,
     scratch: Vec<u8>,
     /// Metadata and attachments written by [`Self::finish`], after the last message (see the
     /// module documentation for why not earlier).
     deferred: Vec<ExtraRecord>,
+}
+
+/// A trajectory published as a growing [`PosesInFrame`] at most every
+/// [`PATH_PUBLISH_INTERVAL_NS`] (data time), thinned to at most [`MAX_PATH_POSES`] poses.
+#[derive(Debug)]
+struct PathTrail {
+    poses: Vec<foxglove::messages::Pose>,
+    stride: usize,
+    frames_seen: usize,
+    last_publish_ns: Option<u64>,
+}
+
+impl Default for PathTrail {
+    fn default() -> Self {
+        Self {
+            poses: Vec::new(),
+            stride: 1,
+            frames_seen: 0,
+            last_publish_ns: None,
+        }
+    }
+}
+
+impl PathTrail {
+    /// Adds the pose of the frame at `timestamp_ns`; the message to publish when one is due.
+    fn update(&mut self, timestamp_ns: u64, pose: foxglove::messages::Pose) -> Option<PosesInFrame> {
+        if self.frames_seen.is_multiple_of(self.stride) {
+            self.poses.push(pose.clone());
+            if self.poses.len() > MAX_PATH_POSES {
+                // Keep every other pose; the first (index 0) stays so the path starts right.
+                let mut i = 0;
+                self.poses.retain(|_| {
+                    i += 1;
+                    (i - 1) % 2 == 0
+                });
+                self.stride *= 2;
+            }
+        }
+        self.frames_seen += 1;
+        let due = self
+            .last_publish_ns
+            .is_none_or(|last| timestamp_ns >= last.saturating_add(PATH_PUBLISH_INTERVAL_NS));
+        if !due {
+            return None;
+        }
+        let mut poses = self.poses.clone();
+        // Always end at the current pose, even when the stride skipped it.
+        if poses.last() != Some(&pose) {
+            poses.push(pose);
+        }
+        self.last_publish_ns = Some(timestamp_ns);
+        Some(PosesInFrame {
+            timestamp: Some(codec::timestamp(timestamp_ns)),
+            frame_id: FRAME_WORLD.into(),
+            poses,
+        })
+    }
 }
 
 /// The transform topic to write for `input`: `/tf` unless the input has a `/tf` channel with
@@ -321,16 +384,15 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
                 odometry,
                 tf,
                 path,
+                anchor_path: None,
                 accumulation,
                 points,
                 stats,
             },
             sequences: HashMap::new(),
             contours: options.contours,
-            path: Vec::new(),
-            path_stride: 1,
-            path_frames_seen: 0,
-            last_path_publish_ns: None,
+            path: PathTrail::default(),
+            anchor_path: PathTrail::default(),
             copied_messages: 0,
             new_messages: 0,
             scratch: Vec::new(),
@@ -411,7 +473,21 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
         );
         self.write_proto(self.channels.tf, t, &tf)?;
 
-        self.update_path(frame.timestamp_ns, t, pose.pose.unwrap_or_default())?;
+        if let Some(msg) = self
+            .path
+            .update(frame.timestamp_ns, pose.pose.unwrap_or_default())
+        {
+            self.write_proto(self.channels.path, t, &msg)?;
+        }
+        if let (Some(id), Some(anchor)) = (self.channels.anchor_path, frame.anchor_pose) {
+            let anchor = codec::pose_in_frame(frame.timestamp_ns, FRAME_WORLD, anchor);
+            if let Some(msg) = self
+                .anchor_path
+                .update(frame.timestamp_ns, anchor.pose.unwrap_or_default())
+            {
+                self.write_proto(id, t, &msg)?;
+            }
+        }
 
         if let (Some(id), Some(acc)) = (self.channels.accumulation, frame.accumulation) {
             let data: Vec<u8> = acc.as_slice().iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -463,42 +539,20 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
         Ok(())
     }
 
-    fn update_path(
-        &mut self,
-        timestamp_ns: u64,
-        log_time_ns: u64,
-        pose: foxglove::messages::Pose,
-    ) -> Result<()> {
-        if self.path_frames_seen.is_multiple_of(self.path_stride) {
-            self.path.push(pose);
-            if self.path.len() > MAX_PATH_POSES {
-                // Keep every other pose; the first (index 0) stays so the path starts right.
-                let mut i = 0;
-                self.path.retain(|_| {
-                    i += 1;
-                    (i - 1) % 2 == 0
-                });
-                self.path_stride *= 2;
-            }
-        }
-        self.path_frames_seen += 1;
-        let due = self
-            .last_path_publish_ns
-            .is_none_or(|last| timestamp_ns >= last.saturating_add(PATH_PUBLISH_INTERVAL_NS));
-        if due {
-            let mut poses = self.path.clone();
-            // Always end at the current pose, even when the stride skipped it.
-            if poses.last() != Some(&pose) {
-                poses.push(pose);
-            }
-            let msg = PosesInFrame {
-                timestamp: Some(codec::timestamp(timestamp_ns)),
-                frame_id: FRAME_WORLD.into(),
-                poses,
-            };
-            self.write_proto(self.channels.path, log_time_ns, &msg)?;
-            self.last_path_publish_ns = Some(timestamp_ns);
-        }
+    /// Adds [`TOPIC_ANCHOR_PATH`]; call before the first frame, when the trajectory is
+    /// anchored to a pose channel.
+    ///
+    /// # Errors
+    /// [`Error::Mcap`] on write failure.
+    pub fn add_anchor_path(&mut self) -> Result<()> {
+        let schema = schema_of::<PosesInFrame>()?;
+        let schema_id = self
+            .writer
+            .add_schema(&schema.name, &schema.encoding, &schema.data)?;
+        let id =
+            self.writer
+                .add_channel(schema_id, TOPIC_ANCHOR_PATH, ENCODING_PROTOBUF, &BTreeMap::new())?;
+        self.channels.anchor_path = Some(id);
         Ok(())
     }
 

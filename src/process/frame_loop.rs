@@ -18,7 +18,7 @@ use crate::mcap_io::input::RawMessage;
 use crate::pipeline::{FrameInput, FrameResult, PoseSource};
 use crate::point_cloud::{PointGrid, POINT_STRIDE_BYTES};
 use crate::time::split_ns;
-use crate::trajectory::StampedPose;
+use crate::trajectory::{interpolate, StampedPose};
 
 use super::adapter::{FrameProcessor, ProcessorFactory};
 #[cfg(doc)]
@@ -361,6 +361,11 @@ impl FrameLoop {
             timestamp_ns: stamp,
             world_from_camera: world_from_odometry * result.world_from_camera,
         };
+        // The anchor channel's own pose here, for its path beside the estimated one.
+        let anchor_pose = match (self.world_from_odometry, ctx.anchor_poses) {
+            (Some(_), Some((_, poses))) => interpolate(poses, stamp, ctx.config.max_pose_gap_ns),
+            _ => None,
+        };
         hooks.frame_done(&pose, &result.mask)?;
         output.send(WriteOp::Frame(Box::new(FrameWrite {
             log_time_ns: frame.log_time_ns,
@@ -368,6 +373,7 @@ impl FrameLoop {
             frame_id: frame.frame_id,
             mask: result.mask,
             world_from_camera: pose.world_from_camera,
+            anchor_pose,
             accumulation: result.accumulation_m,
             points: frame.cloud,
             stats,

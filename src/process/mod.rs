@@ -154,6 +154,9 @@ pub fn process_file<W: Write + Seek + Send>(
     };
 
     let mut writer = AnnotatedWriter::new(sink, input, &config.annotate)?;
+    if anchor_poses.is_some() {
+        writer.add_anchor_path()?;
+    }
     let mut metadata = BTreeMap::from([
         ("tool".to_owned(), crate::mcap_io::LIBRARY.to_owned()),
         (

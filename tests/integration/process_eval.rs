@@ -126,7 +126,7 @@ fn wrong_poses_give_nonzero_errors_and_the_cli_prints_them() {
 
 #[test]
 fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
-    use occmask::mcap_io::annotate::TOPIC_ODOMETRY;
+    use occmask::mcap_io::annotate::{TOPIC_ANCHOR_PATH, TOPIC_ODOMETRY};
     use occmask::mcap_io::input::decode::read_poses;
     use occmask::process::OdometryAnchor;
     use occmask::trajectory::{interpolate, StampedPose};
@@ -178,6 +178,35 @@ fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
         );
     }
     assert!((oa.ate.unwrap().rmse_m - of.ate.unwrap().rmse_m).abs() < 1e-9);
+
+    // The anchor channel's path, beside the estimated one in the same frame: published once
+    // (12 frames span less than its 1 s interval), ending at the ground truth of the frame it
+    // was published with; no such channel without an anchor.
+    let anchor_paths = |path: &Path| -> Vec<foxglove::messages::PosesInFrame> {
+        let bytes = std::fs::read(path).unwrap();
+        mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .filter(|m| m.channel.topic == TOPIC_ANCHOR_PATH)
+            .map(|m| prost::Message::decode(&m.data[..]).unwrap())
+            .collect()
+    };
+    let published = anchor_paths(&anchored);
+    assert_eq!(published.len(), 1);
+    assert_eq!(published[0].frame_id, "world");
+    let stamp = published[0]
+        .timestamp
+        .map(|t| t.sec() as u64 * 1_000_000_000 + u64::from(t.nsec()))
+        .unwrap();
+    let truth_then = interpolate(&truth, stamp, u64::MAX).unwrap();
+    let last = published[0]
+        .poses
+        .last()
+        .and_then(|p| p.position.as_ref())
+        .unwrap();
+    let d = nalgebra::Vector3::new(last.x, last.y, last.z) - truth_then.translation.vector;
+    assert!(d.norm() < 1e-9, "anchor path ends {d:?} from the ground truth");
+    assert!(anchor_paths(&unanchored).is_empty());
 
     // A ground truth that starts after the images anchors at the first frame it covers: the
     // file is processed, frame 3 is where the estimate meets the ground truth, and the frames

@@ -15,8 +15,8 @@ use prost::Message as _;
 
 use occmask::error::TopicRole;
 use occmask::mcap_io::annotate::{
-    AnnotateOptions, FRAME_CAMERA_ESTIMATED, TOPIC_ACCUMULATION, TOPIC_MASK, TOPIC_MASK_ANNOTATIONS,
-    TOPIC_ODOMETRY, TOPIC_PATH, TOPIC_POINTS, TOPIC_STATS, TOPIC_TF_FALLBACK,
+    AnnotateOptions, FRAME_CAMERA_ESTIMATED, TOPIC_ACCUMULATION, TOPIC_ANCHOR_PATH, TOPIC_MASK,
+    TOPIC_MASK_ANNOTATIONS, TOPIC_ODOMETRY, TOPIC_PATH, TOPIC_POINTS, TOPIC_STATS, TOPIC_TF_FALLBACK,
 };
 use occmask::mcap_io::input::McapInput;
 use occmask::process::{process_file, NoHooks, ProcessConfig, ProcessReport};
@@ -273,6 +273,7 @@ fn sidecar_has_only_new_channels_and_accumulation_is_opt_in() {
         topics,
         vec![
             TOPIC_ACCUMULATION,
+            TOPIC_ANCHOR_PATH,
             TOPIC_MASK,
             TOPIC_MASK_ANNOTATIONS,
             TOPIC_ODOMETRY,

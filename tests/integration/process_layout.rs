@@ -13,8 +13,8 @@ use crate::common::mcap_fixture as process_support;
 use std::io::Cursor;
 
 use occmask::mcap_io::annotate::{
-    AnnotateOptions, METADATA_PROCESS, TOPIC_MASK, TOPIC_MASK_ANNOTATIONS, TOPIC_ODOMETRY, TOPIC_PATH,
-    TOPIC_POINTS, TOPIC_STATS,
+    AnnotateOptions, METADATA_PROCESS, TOPIC_ANCHOR_PATH, TOPIC_MASK, TOPIC_MASK_ANNOTATIONS, TOPIC_ODOMETRY,
+    TOPIC_PATH, TOPIC_POINTS, TOPIC_STATS,
 };
 use occmask::mcap_io::input::McapInput;
 use occmask::mcap_io::{
@@ -59,6 +59,7 @@ fn layout_panels_show_topics_we_write() {
         TOPIC_MASK_ANNOTATIONS,
         TOPIC_ODOMETRY,
         TOPIC_PATH,
+        TOPIC_ANCHOR_PATH,
         TOPIC_POINTS,
         TOPIC_STATS,
     ];
@@ -102,7 +103,12 @@ fn layout_panels_show_topics_we_write() {
     let scene = &configs["3D!occmask-scene"]["topics"];
     assert_eq!(scene[TOPIC_POINTS]["colorMode"], "rgba-fields");
     assert_eq!(scene[TOPIC_POINTS]["colorField"], "red");
-    for topic in [TOPIC_PATH, TOPIC_ODOMETRY, TOPIC_GROUNDTRUTH_POSE] {
+    for topic in [
+        TOPIC_PATH,
+        TOPIC_ANCHOR_PATH,
+        TOPIC_ODOMETRY,
+        TOPIC_GROUNDTRUTH_POSE,
+    ] {
         assert_eq!(scene[topic]["visible"], true, "{topic}");
     }
 }

@@ -536,6 +536,17 @@ async function main(argv) {
     }
     report.check(paths.length > 0 && bad.length === 0, "/occmask/path: PosesInFrame in world ending at the current odometry pose", bad.slice(0, 3).join("; ") || `${paths.length} paths, last with ${prevLen} poses`);
   }
+  {
+    // The anchor channel's path (only when the run was anchored): in a known frame, ending at
+    // the anchor pose channel's pose of a frame no later than the path's stamp.
+    const anchorPaths = messages.get("/occmask/anchor_path") ?? [];
+    if (anchorPaths.length > 0) {
+      const bad = anchorPaths
+        .filter(({ msg }) => !knownFrame(msg.frame_id) || msg.poses.length < 1 || msg.poses.some((p) => Math.abs(quatNorm(p.orientation) - 1) > QUAT_NORM_TOL || !finite(p.position.x, p.position.y, p.position.z)))
+        .map(({ msg }) => `anchor path at ${nsOf(msg.timestamp)} ns in ${msg.frame_id} with ${msg.poses.length} poses`);
+      report.check(bad.length === 0, "/occmask/anchor_path: PosesInFrame in a frame of the transform tree, unit quaternions", bad.slice(0, 3).join("; ") || `${anchorPaths.length} paths`);
+    }
+  }
 
   // --- Point clouds (opt-in): one per colour image at its stamp, in a frame of the transform
   // tree, x/y/z float32 and red/green/blue/alpha uint8 inside the stride, finite points in front
