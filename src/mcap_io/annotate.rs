@@ -261,7 +261,7 @@ impl PathTrail {
     /// Adds the pose of the frame at `timestamp_ns`; the message to publish when one is due.
     fn update(&mut self, timestamp_ns: u64, pose: foxglove::messages::Pose) -> Option<PosesInFrame> {
         if self.frames_seen.is_multiple_of(self.stride) {
-            self.poses.push(pose.clone());
+            self.poses.push(pose);
             if self.poses.len() > MAX_PATH_POSES {
                 // Keep every other pose; the first (index 0) stays so the path starts right.
                 let mut i = 0;
