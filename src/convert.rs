@@ -212,16 +212,10 @@ fn check_size(
 /// Checks the pairing: a sequence without a single pair is an error.
 fn check_association(seq: &Sequence, association: &Association, max_pair_gap_ns: u64) -> Result<()> {
     if association.pairs.is_empty() {
-        let nearest = nearest_gap_ns(&seq.color, &seq.depth)
-            .map(|g| format!("{:.1} ms", g as f64 / 1e6))
-            .unwrap_or_else(|| "n/a".into());
-        return Err(Error::Dataset {
-            path: seq.root.clone(),
-            message: format!(
-                "no colour frame has a depth frame within {:.1} ms (closest pair: {nearest}); \
-                 raise --max-pair-gap-ms or check the timestamps",
-                max_pair_gap_ns as f64 / 1e6
-            ),
+        return Err(Error::NoPairs {
+            root: seq.root.clone(),
+            max_pair_gap_ns,
+            nearest_gap_ns: nearest_gap_ns(&seq.color, &seq.depth),
         });
     }
     Ok(())
@@ -258,6 +252,34 @@ fn association_text(seq: &Sequence, association: &Association) -> String {
 /// # Errors
 /// Any read, decode, size or write error; nothing is committed by this function (the caller
 /// owns the output file, see [`crate::mcap_io::AtomicOutput`]).
+///
+/// # Example
+/// A TUM folder converted in memory and read back:
+/// ```
+/// use std::ops::ControlFlow;
+/// use std::path::Path;
+/// use occmask::convert::{convert_sequence, resolve_intrinsics, ConvertConfig, DEFAULT_BATCH_EVENTS};
+/// use occmask::dataset::{tum, DatasetKind, DEFAULT_MAX_PAIR_GAP_NS, TUM_DEPTH_UNITS_PER_METER};
+/// use occmask::mcap_io::McapWriteOptions;
+/// use occmask::McapInput;
+///
+/// let sequence = tum::load(Path::new("fixtures/tum_fr2_desk_10"), DatasetKind::Tum)?;
+/// let config = ConvertConfig {
+///     intrinsics: resolve_intrinsics(DatasetKind::Tum, "tum_fr2_desk_10", Some("fr2"))?,
+///     depth_units_per_meter: TUM_DEPTH_UNITS_PER_METER,
+///     max_pair_gap_ns: DEFAULT_MAX_PAIR_GAP_NS,
+///     keep_unpaired: false,
+///     write: McapWriteOptions::default(),
+///     batch_events: DEFAULT_BATCH_EVENTS,
+///     command_line: "example".into(),
+/// };
+/// let sink = std::io::Cursor::new(Vec::new());
+/// let (sink, report) = convert_sequence(&sequence, &config, sink, &mut |_, _| ControlFlow::Continue(()))?;
+/// assert_eq!(report.pairs, 10);
+/// let input = McapInput::from_bytes(sink.into_inner(), Path::new("tum.mcap"))?;
+/// assert!(input.channel_by_topic(occmask::mcap_io::TOPIC_DEPTH_IMAGE).is_some());
+/// # Ok::<(), occmask::Error>(())
+/// ```
 pub fn convert_sequence<W: Write + Seek>(
     seq: &Sequence,
     config: &ConvertConfig,
@@ -266,7 +288,7 @@ pub fn convert_sequence<W: Write + Seek>(
 ) -> Result<(W, ConvertReport)> {
     if !(config.depth_units_per_meter.is_finite() && config.depth_units_per_meter > 0.0) {
         return Err(Error::InvalidParameter {
-            name: "--depth-units-per-meter",
+            name: "depth_units_per_meter",
             value: config.depth_units_per_meter.to_string(),
             expected: "a positive number (5000 for TUM, 1000 for millimetres)".into(),
         });
@@ -441,10 +463,7 @@ pub fn convert_sequence<W: Write + Seek>(
     })?;
     if done != total {
         // Only reachable if the reader thread stopped without reporting an error.
-        return Err(Error::Dataset {
-            path: seq.root.clone(),
-            message: format!("conversion stopped after {done} of {total} images and poses"),
-        });
+        return Err(Error::ReaderStopped { done, total });
     }
     report.image_size = expected_size.unwrap_or_default();
 

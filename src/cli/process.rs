@@ -237,7 +237,7 @@ pub struct ProcessArgs {
 }
 
 fn parse_seconds(text: &str) -> Result<u64, String> {
-    parse_seconds_to_ns(text)
+    parse_seconds_to_ns(text).map_err(|e| e.to_string())
 }
 
 /// One input's plan.
@@ -473,10 +473,7 @@ impl ProcessHooks for Hooks<'_> {
             size: mask.size(),
         })?;
         img.save_with_format(&path, image::ImageFormat::Png)
-            .map_err(|e| occmask::Error::BadImage {
-                path: path.clone(),
-                message: format!("cannot write mask PNG: {e}"),
-            })
+            .map_err(|e| occmask::Error::io("cannot write mask PNG", &path, std::io::Error::other(e)))
     }
 }
 

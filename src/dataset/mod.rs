@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use prost::bytes::Bytes;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Mismatch, Result};
 use crate::geometry::camera::{presets, PinholeIntrinsics};
 use crate::geometry::distortion::LensDistortion;
 use crate::image_buf::{
@@ -221,16 +221,18 @@ fn check_increasing(path: &Path, items: impl Iterator<Item = (u64, usize)>, what
         if let Some((pt, pline)) = previous {
             if t <= pt {
                 let how = if t == pt { "duplicates" } else { "is earlier than" };
-                return Err(Error::Parse {
-                    path: path.to_owned(),
-                    line,
-                    message: format!(
-                        "{what} timestamps must increase strictly, but {} {how} {} on line {pline} \
-                         (occmask rejects unsorted or duplicate stamps instead of guessing an order)",
+                return Err(Mismatch::new(
+                    format!(
+                        "{what} timestamps that increase strictly (occmask rejects unsorted or \
+                         duplicate stamps instead of guessing an order)"
+                    ),
+                    format!(
+                        "{}, which {how} {} on line {pline}",
                         format_ns_as_seconds(t, 6),
                         format_ns_as_seconds(pt, 6)
                     ),
-                });
+                )
+                .at_line(path, line));
             }
         }
         previous = Some((t, line));
@@ -241,13 +243,12 @@ fn check_increasing(path: &Path, items: impl Iterator<Item = (u64, usize)>, what
 /// Reads a text file as UTF-8.
 fn read_text(path: &Path) -> Result<String> {
     let text = std::fs::read(path).map_err(|e| Error::io("cannot read", path, e))?;
-    String::from_utf8(text).map_err(|e| Error::Parse {
-        path: path.to_owned(),
-        line: 1 + e.as_bytes()[..e.utf8_error().valid_up_to()]
+    String::from_utf8(text).map_err(|e| {
+        let line = 1 + e.as_bytes()[..e.utf8_error().valid_up_to()]
             .iter()
             .filter(|&&b| b == b'\n')
-            .count(),
-        message: "expected UTF-8 text, found invalid bytes".into(),
+            .count();
+        Mismatch::new("UTF-8 text", "invalid bytes").at_line(path, line)
     })
 }
 
@@ -282,29 +283,25 @@ fn image_list(text: &str, source: &Path, root: &Path, require_files: bool) -> Re
     let mut out = Vec::new();
     let mut line_numbers = Vec::new();
     for (line, text) in content_lines(text) {
-        let parse_err = |message: String| Error::Parse {
-            path: source.to_owned(),
-            line,
-            message,
-        };
+        let parse_err = |mismatch: Mismatch| mismatch.at_line(source, line);
         let fields: Vec<&str> = text.split_whitespace().collect();
         if fields.len() != 2 {
-            return Err(parse_err(format!(
-                "expected 2 fields 'timestamp path', found {} in {text:?}",
-                fields.len()
+            return Err(parse_err(Mismatch::new(
+                "2 fields 'timestamp path'",
+                format!("{} in {text:?}", fields.len()),
             )));
         }
         let timestamp_ns = crate::time::parse_seconds_to_ns(fields[0]).map_err(parse_err)?;
         let image_path = root.join(fields[1]);
         if require_files && !image_path.is_file() {
             let found = if image_path.is_dir() {
-                "is a directory, expected an image file"
+                "a directory"
             } else {
-                "does not exist"
+                "nothing (it does not exist)"
             };
-            return Err(parse_err(format!(
-                "listed image {} {found}",
-                image_path.display()
+            return Err(parse_err(Mismatch::new(
+                format!("the listed image {} to be an image file", image_path.display()),
+                found,
             )));
         }
         out.push(ImageRef {
@@ -339,11 +336,7 @@ pub fn parse_groundtruth(text: &str, source: &Path) -> Result<Vec<StampedPose>> 
     let mut poses = Vec::new();
     let mut line_numbers = Vec::new();
     for (line, text) in content_lines(text) {
-        let pose = parse_tum_line(text).map_err(|message| Error::Parse {
-            path: source.to_owned(),
-            line,
-            message,
-        })?;
+        let pose = parse_tum_line(text).map_err(|mismatch| mismatch.at_line(source, line))?;
         poses.push(pose);
         line_numbers.push(line);
     }
@@ -390,7 +383,7 @@ pub fn parse_camera(text: &str) -> Result<CameraSpec> {
         return Ok(preset);
     }
     let bad = || Error::InvalidParameter {
-        name: "--camera",
+        name: "camera",
         value: text.to_owned(),
         expected: CAMERA_FORMS.into(),
     };
@@ -487,10 +480,11 @@ pub struct ColorImage {
     pub size: ImageSize,
 }
 
-fn bad_image(path: &Path, message: impl Into<String>) -> Error {
+fn bad_image(path: &Path, expected: impl Into<String>, found: impl Into<String>) -> Error {
     Error::BadImage {
         path: path.to_owned(),
-        message: message.into(),
+        expected: expected.into(),
+        found: found.into(),
     }
 }
 
@@ -507,12 +501,8 @@ const JPEG_EOI: [u8; 2] = [0xFF, 0xD9];
 /// [`Error::Io`] if unreadable, [`Error::BadImage`] for anything else.
 pub fn read_color(path: &Path) -> Result<ColorImage> {
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read colour image", path, e))?;
-    let format = ColorFormat::from_magic(&bytes).ok_or_else(|| {
-        bad_image(
-            path,
-            "expected a PNG or JPEG colour image, found neither signature",
-        )
-    })?;
+    let format = ColorFormat::from_magic(&bytes)
+        .ok_or_else(|| bad_image(path, "a PNG or JPEG colour image", "neither signature"))?;
     let complete = match format {
         ColorFormat::Png => bytes.ends_with(&PNG_TRAILER),
         ColorFormat::Jpeg => {
@@ -524,11 +514,12 @@ pub fn read_color(path: &Path) -> Result<ColorImage> {
         }
     };
     if !complete {
+        let format = format.as_str().to_uppercase();
         return Err(bad_image(
             path,
+            format!("a complete {format} colour image"),
             format!(
-                "truncated {} colour image: the end marker is missing ({} bytes)",
-                format.as_str().to_uppercase(),
+                "a truncated {format} colour image: the end marker is missing ({} bytes)",
                 bytes.len()
             ),
         ));
@@ -539,7 +530,7 @@ pub fn read_color(path: &Path) -> Result<ColorImage> {
     };
     let (width, height) = image::ImageReader::with_format(std::io::Cursor::new(&bytes), image_format)
         .into_dimensions()
-        .map_err(|e| bad_image(path, format!("unreadable colour image header: {e}")))?;
+        .map_err(|e| bad_image(path, "a readable colour image header", e.to_string()))?;
     Ok(ColorImage {
         bytes: Bytes::from(bytes),
         format,
@@ -565,13 +556,15 @@ pub struct DepthImage {
 pub fn read_depth(path: &Path) -> Result<DepthImage> {
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read depth image", path, e))?;
     if ColorFormat::from_magic(&bytes) != Some(ColorFormat::Png) {
-        return Err(bad_image(
-            path,
-            "expected a 16-bit PNG depth image, found no PNG signature",
-        ));
+        return Err(bad_image(path, "a 16-bit PNG depth image", "no PNG signature"));
     }
-    let image = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
-        .map_err(|e| bad_image(path, format!("corrupt or truncated depth PNG: {e}")))?;
+    let image = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|e| {
+        bad_image(
+            path,
+            "a 16-bit PNG depth image",
+            format!("a corrupt or truncated depth PNG: {e}"),
+        )
+    })?;
     let size = ImageSize::new(image.width() as usize, image.height() as usize);
     match image {
         image::DynamicImage::ImageLuma16(buffer) => Ok(DepthImage {
@@ -580,8 +573,9 @@ pub fn read_depth(path: &Path) -> Result<DepthImage> {
         }),
         other => Err(bad_image(
             path,
+            "a 16-bit single-channel depth PNG",
             format!(
-                "expected a 16-bit single-channel depth PNG, found {:?}{}",
+                "{:?}{}",
                 other.color(),
                 if other.color().bytes_per_pixel() == 1 {
                     " (8-bit depth cannot hold sensor depth; use the original 16-bit PNGs)"
@@ -618,7 +612,7 @@ pub fn decode_pair(sequence: &Sequence, pair: &FramePair, depth_units_per_meter:
     let bytes =
         std::fs::read(&color.path).map_err(|e| Error::io("cannot read colour image", &color.path, e))?;
     let rgb = image::load_from_memory(&bytes)
-        .map_err(|e| bad_image(&color.path, format!("cannot decode colour image: {e}")))?
+        .map_err(|e| bad_image(&color.path, "a decodable colour image", e.to_string()))?
         .to_rgb8();
     let size = ImageSize::new(rgb.width() as usize, rgb.height() as usize);
     let rgb = Rgb8::from_vec(size, rgb.pixels().map(|p| p.0).collect())?;
@@ -654,8 +648,8 @@ const MASK_THRESHOLD: u8 = 128;
 /// [`Error::Io`] if unreadable; [`Error::BadImage`] for a corrupt image.
 pub fn read_mask(path: &Path) -> Result<Mask> {
     let bytes = std::fs::read(path).map_err(|e| Error::io("cannot read mask image", path, e))?;
-    let image =
-        image::load_from_memory(&bytes).map_err(|e| bad_image(path, format!("corrupt mask image: {e}")))?;
+    let image = image::load_from_memory(&bytes)
+        .map_err(|e| bad_image(path, "a mask image", format!("a corrupt one: {e}")))?;
     let gray = image.into_luma8();
     let size = ImageSize::new(gray.width() as usize, gray.height() as usize);
     let data = gray
@@ -682,12 +676,10 @@ pub(crate) fn folder_name(root: &Path) -> String {
 /// Checks `root` is a directory.
 pub(crate) fn require_dir(root: &Path, what: &str) -> Result<()> {
     if !root.is_dir() {
-        return Err(Error::Dataset {
+        return Err(Error::DatasetLayout {
             path: root.to_owned(),
-            message: format!(
-                "expected {what} directory, found {}",
-                if root.exists() { "a file" } else { "nothing" }
-            ),
+            expected: format!("{what} directory"),
+            found: if root.exists() { "a file" } else { "nothing" }.to_owned(),
         });
     }
     Ok(())

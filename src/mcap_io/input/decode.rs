@@ -198,31 +198,23 @@ impl CalibrationMsg {
     /// Pinhole intrinsics from K.
     ///
     /// # Errors
-    /// [`Error::Decode`] naming `topic` when K is not a 3×3 pinhole matrix with positive focal
-    /// lengths (a zero K means "uncalibrated" in ROS).
+    /// [`Error::BadIntrinsics`] naming `topic` when K is not a 3×3 pinhole matrix with positive
+    /// focal lengths (a zero K means "uncalibrated" in ROS).
     pub fn intrinsics(&self, topic: &str) -> Result<PinholeIntrinsics> {
-        crate::mcap_io::codec::intrinsics_from_k(
-            &self.k,
-            topic,
-            " (an all-zero K means the camera is uncalibrated: pass --camera FX,FY,CX,CY)",
-        )
+        crate::mcap_io::codec::intrinsics_from_k(&self.k, topic)
     }
 
     /// The lens distortion (`None` for zero coefficients).
     ///
     /// # Errors
-    /// [`Error::Decode`] naming `topic` for unsupported models (fisheye) with non-zero
-    /// coefficients, naming the flags that override or ignore the distortion.
+    /// [`Error::UnsupportedDistortion`] naming `topic` for unsupported models (fisheye) with
+    /// non-zero coefficients.
     pub fn distortion(&self, topic: &str) -> Result<Option<LensDistortion>> {
-        LensDistortion::from_ros(&self.distortion_model, &self.d).map_err(|e| {
-            decode_error(
-                topic,
-                format!(
-                    "{}; pass --camera FX,FY,CX,CY[,K1,K2,P1,P2,K3] to give the camera, or \
-                     --no-undistort to treat the images as pinhole",
-                    e.0
-                ),
-            )
+        LensDistortion::from_ros(&self.distortion_model, &self.d).map_err(|reason| {
+            Error::UnsupportedDistortion {
+                topic: topic.to_owned(),
+                reason,
+            }
         })
     }
 
@@ -1516,11 +1508,9 @@ mod tests {
         let k = c.intrinsics("/ci").unwrap();
         assert_eq!((k.fx, k.fy, k.cx, k.cy), (500.0, 501.0, 2.0, 1.5));
         let zero = CalibrationMsg { k: vec![0.0; 9], ..c };
-        assert!(zero
-            .intrinsics("/ci")
-            .unwrap_err()
-            .to_string()
-            .contains("--camera"));
+        let error = zero.intrinsics("/ci").unwrap_err();
+        assert!(error.to_string().contains("uncalibrated"), "{error}");
+        assert!(matches!(error, Error::BadIntrinsics { ref topic, .. } if topic == "/ci"));
     }
 
     #[test]
