@@ -39,14 +39,16 @@ pub enum Error {
     },
 
     /// A line of a text file could not be parsed.
-    #[error("line {line}: {message} (in {})", path.display())]
+    #[error("line {line}: expected {expected}, found {found} (in {})", path.display())]
     Parse {
         /// The file.
         path: PathBuf,
         /// 1-based line number.
         line: usize,
-        /// What was expected and what was found.
-        message: String,
+        /// What the line should hold there.
+        expected: String,
+        /// What it holds.
+        found: String,
     },
 
     /// A file or directory could not be read or written.
@@ -63,18 +65,62 @@ pub enum Error {
     },
 
     /// An image file could not be decoded or has the wrong pixel format.
-    #[error("{message} ({})", path.display())]
+    #[error("expected {expected}, found {found} ({})", path.display())]
     BadImage {
         /// The file.
         path: PathBuf,
-        /// What was expected and what was found.
-        message: String,
+        /// The image the file should hold.
+        expected: String,
+        /// What it holds (or the decoder's reason).
+        found: String,
     },
 
-    /// A dataset folder is not usable as a whole (missing files, empty sequence, ...).
+    /// A dataset folder is not laid out as its kind requires (missing or misplaced files and
+    /// directories, empty sequence, ...).
+    #[error("expected {expected}, found {found} ({})", path.display())]
+    DatasetLayout {
+        /// The dataset folder, or the file or directory in it.
+        path: PathBuf,
+        /// What should be there.
+        expected: String,
+        /// What is there.
+        found: String,
+    },
+
+    /// No colour frame of a dataset has a depth frame within the pairing tolerance.
+    #[error(
+        "no colour frame has a depth frame within {:.1} ms (closest pair: {}) ({})",
+        *max_pair_gap_ns as f64 / 1e6,
+        nearest_gap_ns.map_or_else(|| "n/a".to_owned(), |g| format!("{:.1} ms", g as f64 / 1e6)),
+        root.display()
+    )]
+    NoPairs {
+        /// The dataset folder.
+        root: PathBuf,
+        /// The largest colour–depth stamp difference allowed, nanoseconds.
+        max_pair_gap_ns: u64,
+        /// The smallest difference found, nanoseconds (`None` when a stream is empty).
+        nearest_gap_ns: Option<u64>,
+    },
+
+    /// A file is not an output of `occmask process`: it has none of the channels scored.
+    #[error(
+        "no {mask_topic} or {odometry_topic} channel: run `occmask process` on the recording first ({})",
+        path.display()
+    )]
+    NotProcessed {
+        /// The file.
+        path: PathBuf,
+        /// The mask topic looked for.
+        mask_topic: &'static str,
+        /// The odometry topic looked for.
+        odometry_topic: &'static str,
+    },
+
+    /// The MCAP container is not usable (not MCAP, a directory, damaged chunks, ...).
     #[error("{message} ({})", path.display())]
     Dataset {
-        /// The dataset folder or file.
+        /// The file.
         path: PathBuf,
         /// What was expected and what was found.
         message: String,
@@ -98,6 +144,24 @@ pub enum Error {
         topic: String,
         /// What was expected and what was found.
         message: String,
+    },
+
+    /// A calibration's camera matrix K is not a pinhole matrix.
+    #[error("topic {topic}: {}", describe_bad_k(k))]
+    BadIntrinsics {
+        /// The calibration topic.
+        topic: String,
+        /// K as found, row-major.
+        k: Vec<f64>,
+    },
+
+    /// A calibration's lens distortion cannot be applied.
+    #[error("topic {topic}: {}", reason.0)]
+    UnsupportedDistortion {
+        /// The calibration topic.
+        topic: String,
+        /// Which model or coefficients were refused, and why.
+        reason: crate::geometry::distortion::UnsupportedDistortion,
     },
 
     /// Depth comes from another camera than colour and cannot be registered to it as given.
@@ -265,6 +329,16 @@ pub enum Error {
         appeared_while_writing: bool,
     },
 
+    /// The dataset reader stopped before every image and pose was written (its own error, if it
+    /// had one, is reported instead).
+    #[error("conversion stopped after {done} of {total} images and poses")]
+    ReaderStopped {
+        /// Images and poses written.
+        done: usize,
+        /// Images and poses planned.
+        total: usize,
+    },
+
     /// The output writer thread stopped (the error it stopped on is reported instead).
     #[error("the output writer stopped")]
     WriterStopped,
@@ -290,6 +364,50 @@ pub enum Error {
         /// The reason given.
         message: String,
     },
+}
+
+/// The message of [`Error::BadIntrinsics`]: what a pinhole K looks like and what was found.
+fn describe_bad_k(k: &[f64]) -> String {
+    if k.len() == 9 {
+        format!(
+            "expected a pinhole K [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0, found {k:?} (an all-zero \
+             K means the camera is uncalibrated)"
+        )
+    } else {
+        format!("expected a 3x3 K (9 numbers), found {} numbers", k.len())
+    }
+}
+
+/// What was expected and what was found instead: the body of [`Error::Parse`] (and of the
+/// other expected/found variants) from parsers that do not know the file they read, so the
+/// caller adds the file and line.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("expected {expected}, found {found}")]
+pub struct Mismatch {
+    /// What was expected.
+    pub expected: String,
+    /// What was found.
+    pub found: String,
+}
+
+impl Mismatch {
+    /// A mismatch of `expected` and `found`.
+    pub fn new(expected: impl Into<String>, found: impl Into<String>) -> Self {
+        Self {
+            expected: expected.into(),
+            found: found.into(),
+        }
+    }
+
+    /// [`Error::Parse`] for line `line` of `path`.
+    pub fn at_line(self, path: &std::path::Path, line: usize) -> Error {
+        Error::Parse {
+            path: path.to_owned(),
+            line,
+            expected: self.expected,
+            found: self.found,
+        }
+    }
 }
 
 impl Error {

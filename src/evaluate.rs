@@ -188,18 +188,40 @@ fn odometry(estimated: &[StampedPose], truth: &[StampedPose]) -> Result<Odometry
 /// Evaluates one output file.
 ///
 /// # Errors
-/// [`Error::Dataset`] when the file has no `/occmask/mask` or `/occmask/odometry` (not an
+/// [`Error::NotProcessed`] when the file has no `/occmask/mask` or `/occmask/odometry` (not an
 /// output of `occmask process`); decode, I/O and MCAP errors.
+///
+/// # Example
+/// The crate-level example scores a processed file; a recording that was never processed is
+/// refused:
+/// ```
+/// use occmask::image_buf::ImageSize;
+/// use occmask::mcap_io::McapWriteOptions;
+/// use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
+///
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("raw.mcap");
+/// let sequence = SyntheticSequence::new(
+///     Scenario::SmallObjectCrossing,
+///     SequenceConfig { size: ImageSize::new(80, 60), frame_count: Some(2), ..SequenceConfig::default() },
+/// );
+/// let file = std::fs::File::create(&path).unwrap();
+/// occmask::convert::write_synthetic_sequence(&sequence, file, &McapWriteOptions::default(), &mut |_| {
+///     std::ops::ControlFlow::Continue(())
+/// })?;
+/// let error = occmask::evaluate(&path).unwrap_err();
+/// assert!(matches!(error, occmask::Error::NotProcessed { .. }), "{error}");
+/// # Ok::<(), occmask::Error>(())
+/// ```
 pub fn evaluate(path: &Path) -> Result<EvalReport> {
     let input = McapInput::open(path)?;
     let mask_channel = input.channel_by_topic(TOPIC_MASK).map(|c| c.id);
     let odometry_present = input.channel_by_topic(TOPIC_ODOMETRY).is_some();
     if mask_channel.is_none() && !odometry_present {
-        return Err(Error::Dataset {
+        return Err(Error::NotProcessed {
             path: path.to_owned(),
-            message: format!(
-                "no {TOPIC_MASK} or {TOPIC_ODOMETRY} channel: run `occmask process` on the recording first"
-            ),
+            mask_topic: TOPIC_MASK,
+            odometry_topic: TOPIC_ODOMETRY,
         });
     }
     let gt_mask_channel = input.channel_by_topic(TOPIC_GROUNDTRUTH_MASK).map(|c| c.id);

@@ -49,9 +49,35 @@
 //! assert_eq!(scores.estimated_masks, 4);
 //! # Ok::<(), occmask::Error>(())
 //! ```
+//!
+//! Each entry type has its own example: [`Processor`] in [`pipeline`], [`DvoTracker`] in
+//! [`dvo`], [`convert_sequence`] (with [`McapInput::from_bytes`]) on its page, the dataset
+//! readers on [`dataset::tum::load`] and [`dataset::larr::load`], [`evaluate`] on its page.
+//! [`OcclusionDetector`] alone, fed ground-truth motion:
+//!
+//! ```
+//! use occmask::image_buf::ImageSize;
+//! use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
+//! use occmask::{OcclusionConfig, OcclusionDetector};
+//!
+//! let config = SequenceConfig { size: ImageSize::new(160, 120), ..SequenceConfig::default() };
+//! let sequence = SyntheticSequence::new(Scenario::SmallObjectCrossing, config);
+//! let mut detector = OcclusionDetector::new(config.size, config.intrinsics(), OcclusionConfig::default())?;
+//! for i in 0..6 {
+//!     let frame = sequence.frame(i);
+//!     let mask = detector.update(&frame.depth_m, &sequence.current_from_previous(i))?;
+//!     assert_eq!(mask.size(), config.size);
+//!     if i == 0 {
+//!         // The first frame only initialises the state.
+//!         assert!(mask.as_slice().iter().all(|&m| m == 0));
+//!     }
+//! }
+//! assert_eq!(detector.frames_processed(), 6);
+//! # Ok::<(), occmask::Error>(())
+//! ```
 #![deny(missing_docs)]
 
-pub mod contour;
+pub(crate) mod contour;
 pub mod convert;
 pub mod dataset;
 pub mod dvo;

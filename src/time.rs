@@ -4,6 +4,8 @@
 //! into integer nanoseconds, never through `f64` (which rounds by ~240 ns at 1.3e9 s and
 //! would make re-runs differ).
 
+use crate::error::Mismatch;
+
 const NANOS_PER_SECOND: u64 = 1_000_000_000;
 /// Digits after the decimal point that fit in nanoseconds.
 const NANO_DIGITS: usize = 9;
@@ -12,9 +14,14 @@ const NANO_DIGITS: usize = 9;
 /// into nanoseconds. Digits beyond the ninth decimal must be zero, so no precision is lost.
 ///
 /// # Errors
-/// A message saying what was expected and what was found.
-pub fn parse_seconds_to_ns(text: &str) -> Result<u64, String> {
-    let bad = || format!("expected a timestamp in decimal seconds such as 1311868164.363181, found {text:?}");
+/// What was expected and what was found (the caller adds the file and line).
+pub fn parse_seconds_to_ns(text: &str) -> Result<u64, Mismatch> {
+    let bad = || {
+        Mismatch::new(
+            "a timestamp in decimal seconds such as 1311868164.363181",
+            format!("{text:?}"),
+        )
+    };
     let (int_part, frac_part) = match text.split_once('.') {
         Some((i, f)) => (i, f),
         None => (text, ""),
@@ -32,7 +39,10 @@ pub fn parse_seconds_to_ns(text: &str) -> Result<u64, String> {
     };
     let (kept, extra) = frac_part.split_at(frac_part.len().min(NANO_DIGITS));
     if extra.bytes().any(|b| b != b'0') {
-        return Err(format!("timestamp {text:?} has more than nanosecond precision"));
+        return Err(Mismatch::new(
+            "a timestamp with at most nanosecond precision (9 decimals)",
+            format!("{text:?}"),
+        ));
     }
     let mut nanos: u64 = 0;
     for b in kept.bytes() {
@@ -42,7 +52,7 @@ pub fn parse_seconds_to_ns(text: &str) -> Result<u64, String> {
     seconds
         .checked_mul(NANOS_PER_SECOND)
         .and_then(|s| s.checked_add(nanos))
-        .ok_or_else(|| format!("timestamp {text:?} is too large (maximum about 1.8e10 s)"))
+        .ok_or_else(|| Mismatch::new("a timestamp up to about 1.8e10 s", format!("{text:?}")))
 }
 
 /// Formats nanoseconds as decimal seconds with at least `min_decimals` digits after the point

@@ -2,6 +2,7 @@
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
+use crate::error::Mismatch;
 use crate::time::{format_ns_as_seconds, parse_seconds_to_ns};
 
 /// A camera pose at a time: `world_from_camera` maps camera-frame points into the world.
@@ -68,13 +69,13 @@ pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-2;
 /// Parses one TUM pose line (`timestamp tx ty tz qx qy qz qw`, whitespace separated).
 ///
 /// # Errors
-/// A message saying what was expected and what was found (the caller adds file and line).
-pub fn parse_tum_line(line: &str) -> Result<StampedPose, String> {
+/// What was expected and what was found (the caller adds file and line).
+pub fn parse_tum_line(line: &str) -> Result<StampedPose, Mismatch> {
     let fields: Vec<&str> = line.split_whitespace().collect();
     if fields.len() != 8 {
-        return Err(format!(
-            "expected 8 fields 'timestamp tx ty tz qx qy qz qw', found {}",
-            fields.len()
+        return Err(Mismatch::new(
+            "8 fields 'timestamp tx ty tz qx qy qz qw'",
+            fields.len().to_string(),
         ));
     }
     let timestamp_ns = parse_seconds_to_ns(fields[0])?;
@@ -82,11 +83,11 @@ pub fn parse_tum_line(line: &str) -> Result<StampedPose, String> {
     for (i, f) in fields[1..].iter().enumerate() {
         let x: f64 = f
             .parse()
-            .map_err(|_| format!("expected a number in field {}, found {f:?}", i + 2))?;
+            .map_err(|_| Mismatch::new(format!("a number in field {}", i + 2), format!("{f:?}")))?;
         if !x.is_finite() {
-            return Err(format!(
-                "expected a finite number in field {}, found {f:?}",
-                i + 2
+            return Err(Mismatch::new(
+                format!("a finite number in field {}", i + 2),
+                format!("{f:?}"),
             ));
         }
         v[i] = x;
@@ -94,8 +95,9 @@ pub fn parse_tum_line(line: &str) -> Result<StampedPose, String> {
     let q = Quaternion::new(v[6], v[3], v[4], v[5]);
     let norm = q.norm();
     if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
-        return Err(format!(
-            "expected a unit quaternion qx qy qz qw, found one of norm {norm:.4}"
+        return Err(Mismatch::new(
+            "a unit quaternion qx qy qz qw",
+            format!("one of norm {norm:.4}"),
         ));
     }
     Ok(StampedPose {
@@ -178,15 +180,21 @@ mod tests {
 
     #[test]
     fn tum_line_errors_say_what_is_wrong() {
-        assert!(parse_tum_line("1.0 1 2 3").unwrap_err().contains("found 4"));
+        assert!(parse_tum_line("1.0 1 2 3")
+            .unwrap_err()
+            .to_string()
+            .contains("found 4"));
         assert!(parse_tum_line("1.0 1 2 x 0 0 0 1")
             .unwrap_err()
+            .to_string()
             .contains("field 4"));
         assert!(parse_tum_line("1.0 1 2 3 0 0 0 2")
             .unwrap_err()
+            .to_string()
             .contains("norm 2.0000"));
         assert!(parse_tum_line("1.0 1 2 NaN 0 0 0 1")
             .unwrap_err()
+            .to_string()
             .contains("finite"));
     }
 

@@ -14,6 +14,12 @@ pub fn flag_hint(error: &Error) -> Option<Cow<'static, str>> {
         }
         Error::CalibrationSize { .. } => "pass --camera FX,FY,CX,CY for the image size",
         Error::BadDepthUnits { .. } => "pass --depth-units-per-meter",
+        Error::BadIntrinsics { .. } => "pass --camera FX,FY,CX,CY",
+        Error::UnsupportedDistortion { .. } => {
+            "pass --camera FX,FY,CX,CY[,K1,K2,P1,P2,K3] to give the camera, or --no-undistort to \
+             treat the images as pinhole"
+        }
+        Error::NoPairs { .. } => "raise --max-pair-gap-ms or check the timestamps",
         Error::NoTopic { role, .. } => return Some(format!("pass {}", topic_flag(*role)).into()),
         Error::AmbiguousTopic { role, .. } => {
             return Some(format!("choose one with {}", topic_flag(*role)).into())

@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Mismatch, Result};
 use crate::time::parse_seconds_to_ns;
 
 use super::{
@@ -41,10 +41,11 @@ fn find_dir(root: &Path, wanted: &str) -> Result<Option<PathBuf>> {
     match found.len() {
         0 => Ok(None),
         1 => Ok(found.pop()),
-        _ => Err(Error::Dataset {
+        _ => Err(Error::DatasetLayout {
             path: root.to_owned(),
-            message: format!(
-                "expected one '{wanted}' directory, found {}: {}",
+            expected: format!("one '{wanted}' directory"),
+            found: format!(
+                "{}: {}",
                 found.len(),
                 found
                     .iter()
@@ -76,9 +77,10 @@ fn list_timed_images(dir: &Path, allow_jpeg: bool) -> Result<Vec<ImageRef>> {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let timestamp_ns = parse_seconds_to_ns(&stem).map_err(|message| Error::BadImage {
+        let timestamp_ns = parse_seconds_to_ns(&stem).map_err(|mismatch| Error::BadImage {
             path: path.clone(),
-            message: format!("LARR image names must be capture times in seconds: {message}"),
+            expected: format!("a LARR image named by its capture time: {}", mismatch.expected),
+            found: mismatch.found,
         })?;
         out.push(ImageRef { timestamp_ns, path });
     }
@@ -98,9 +100,10 @@ fn list_timed_images(dir: &Path, allow_jpeg: bool) -> Result<Vec<ImageRef>> {
 }
 
 fn required_dir(root: &Path, wanted: &str, what: &str) -> Result<PathBuf> {
-    find_dir(root, wanted)?.ok_or_else(|| Error::Dataset {
+    find_dir(root, wanted)?.ok_or_else(|| Error::DatasetLayout {
         path: root.to_owned(),
-        message: format!("expected a '{wanted}/' directory of {what} images (LARR layout), found none"),
+        expected: format!("a '{wanted}/' directory of {what} images (LARR layout)"),
+        found: "none".to_owned(),
     })
 }
 
@@ -133,26 +136,28 @@ pub fn parse_association(
     let mut pairs = Vec::new();
     let mut line_numbers = Vec::new();
     for (line, text) in content_lines(text) {
-        let err = |message: String| Error::Parse {
-            path: source.to_owned(),
-            line,
-            message,
-        };
+        let err = |mismatch: Mismatch| mismatch.at_line(source, line);
         let fields: Vec<&str> = text.split_whitespace().collect();
         if fields.len() != 4 {
-            return Err(err(format!(
-                "expected 4 fields 'rgb_time rgb_path depth_time depth_path', found {}",
-                fields.len()
+            return Err(err(Mismatch::new(
+                "4 fields 'rgb_time rgb_path depth_time depth_path'",
+                fields.len().to_string(),
             )));
         }
         let tc = parse_seconds_to_ns(fields[0]).map_err(err)?;
         let td = parse_seconds_to_ns(fields[2]).map_err(err)?;
+        let no_image = |what: &str, dir: &str, time: &str| {
+            err(Mismatch::new(
+                format!("a {what} image with time {time} in {dir}"),
+                "none",
+            ))
+        };
         let ci = *color_at
             .get(&tc)
-            .ok_or_else(|| err(format!("no colour image with time {} in rgb/", fields[0])))?;
+            .ok_or_else(|| no_image("colour", "rgb/", fields[0]))?;
         let di = *depth_at
             .get(&td)
-            .ok_or_else(|| err(format!("no depth image with time {} in depth/", fields[2])))?;
+            .ok_or_else(|| no_image("depth", "depth/", fields[2]))?;
         pairs.push(FramePair { color: ci, depth: di });
         line_numbers.push(line);
     }
@@ -171,8 +176,15 @@ pub fn parse_association(
 /// mask whose time matches no colour frame goes to [`Sequence::unmatched_masks`].
 ///
 /// # Errors
-/// [`Error::Dataset`] for missing or empty image directories; [`Error::Parse`] /
+/// [`Error::DatasetLayout`] for missing or empty image directories; [`Error::Parse`] /
 /// [`Error::BadImage`] for malformed text files or image names.
+///
+/// # Example
+/// ```
+/// let sequence = occmask::dataset::larr::load(std::path::Path::new("fixtures/larr_fr2_desk_mini"))?;
+/// assert!(!sequence.color.is_empty() && !sequence.depth.is_empty());
+/// # Ok::<(), occmask::Error>(())
+/// ```
 pub fn load(root: &Path) -> Result<Sequence> {
     require_dir(root, "a LARR RGB-D dataset")?;
     let rgb_dir = required_dir(root, "rgb", "colour")?;
@@ -181,9 +193,10 @@ pub fn load(root: &Path) -> Result<Sequence> {
     let depth = list_timed_images(&depth_dir, false)?;
     for (dir, list, what) in [(&rgb_dir, &color, "colour"), (&depth_dir, &depth, "depth")] {
         if list.is_empty() {
-            return Err(Error::Dataset {
+            return Err(Error::DatasetLayout {
                 path: dir.clone(),
-                message: format!("expected {what} images named <time>.png, found none (empty sequence)"),
+                expected: format!("{what} images named <time>.png"),
+                found: "none (empty sequence)".to_owned(),
             });
         }
     }

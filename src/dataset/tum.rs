@@ -11,8 +11,18 @@ use super::{folder_name, read_groundtruth, read_image_list, require_dir, Dataset
 /// layout, different units and camera).
 ///
 /// # Errors
-/// [`Error::Dataset`] when the folder or a list file is missing or a list is empty;
+/// [`Error::DatasetLayout`] when the folder or a list file is missing or a list is empty;
 /// [`Error::Parse`] for malformed or unsorted lines and listed files that do not exist.
+///
+/// # Example
+/// ```
+/// use occmask::dataset::{tum, DatasetKind};
+///
+/// let sequence = tum::load(std::path::Path::new("fixtures/tum_fr2_desk_10"), DatasetKind::Tum)?;
+/// assert_eq!((sequence.color.len(), sequence.depth.len()), (10, 10));
+/// assert!(sequence.color.windows(2).all(|w| w[0].timestamp_ns < w[1].timestamp_ns));
+/// # Ok::<(), occmask::Error>(())
+/// ```
 pub fn load(root: &Path, kind: DatasetKind) -> Result<Sequence> {
     require_dir(root, "a TUM RGB-D dataset")?;
     let list = |name: &str, what: &str| {
@@ -28,18 +38,18 @@ pub fn load(root: &Path, kind: DatasetKind) -> Result<Sequence> {
             } else {
                 "no such file"
             };
-            return Err(Error::Dataset {
+            return Err(Error::DatasetLayout {
                 path: path.clone(),
-                message: format!(
-                    "expected {name} listing the {what} images ('timestamp path' per line), found {found}{hint}"
-                ),
+                expected: format!("{name} listing the {what} images ('timestamp path' per line)"),
+                found: format!("{found}{hint}"),
             });
         }
         let images = read_image_list(&path, root)?;
         if images.is_empty() {
-            return Err(Error::Dataset {
+            return Err(Error::DatasetLayout {
                 path,
-                message: format!("expected at least one {what} image, found an empty list (empty sequence)"),
+                expected: format!("at least one {what} image"),
+                found: "an empty list (empty sequence)".to_owned(),
             });
         }
         Ok((path, images))
@@ -49,10 +59,10 @@ pub fn load(root: &Path, kind: DatasetKind) -> Result<Sequence> {
     let mut text_files = vec![rgb_list, depth_list];
     let gt_path = root.join("groundtruth.txt");
     if gt_path.exists() && !gt_path.is_file() {
-        return Err(Error::Dataset {
+        return Err(Error::DatasetLayout {
             path: gt_path,
-            message: "expected groundtruth.txt to be a text file of poses, found a directory or device"
-                .into(),
+            expected: "groundtruth.txt to be a text file of poses".to_owned(),
+            found: "a directory or device".to_owned(),
         });
     }
     let groundtruth = if gt_path.is_file() {

@@ -213,24 +213,22 @@ fn decode_error(topic: &str, message: impl Into<String>) -> Error {
 }
 
 /// Pinhole intrinsics from a row-major 3×3 camera matrix `k`, shared by every calibration
-/// decoder. `hint` is appended to the error (e.g. which flag supplies intrinsics instead).
+/// decoder.
 ///
 /// # Errors
-/// [`Error::Decode`] naming `topic` when `k` does not have 9 entries or is not a valid
+/// [`Error::BadIntrinsics`] naming `topic` when `k` does not have 9 entries or is not a valid
 /// pinhole matrix (positive focal lengths, zero skew, last row 0 0 1).
-pub fn intrinsics_from_k(k: &[f64], topic: &str, hint: &str) -> Result<PinholeIntrinsics> {
+pub fn intrinsics_from_k(k: &[f64], topic: &str) -> Result<PinholeIntrinsics> {
+    let bad = || Error::BadIntrinsics {
+        topic: topic.to_owned(),
+        k: k.to_vec(),
+    };
     if k.len() != 9 {
-        return Err(decode_error(
-            topic,
-            format!("expected a 3x3 K (9 numbers), found {} numbers", k.len()),
-        ));
+        return Err(bad());
     }
     let intrinsics = PinholeIntrinsics::new(k[0], k[4], k[2], k[5]);
     if !intrinsics.is_valid() || k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
-        return Err(decode_error(
-            topic,
-            format!("expected a pinhole K [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0, found {k:?}{hint}"),
-        ));
+        return Err(bad());
     }
     Ok(intrinsics)
 }

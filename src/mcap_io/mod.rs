@@ -24,6 +24,7 @@ pub mod output;
 pub mod ros_out;
 pub mod writer;
 
+pub use crate::contour::ContourOptions;
 pub use codec::ColorFormat;
 pub use output::AtomicOutput;
 pub use writer::{Compression, McapWriteOptions, RgbdMcapWriter};

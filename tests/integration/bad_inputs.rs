@@ -934,7 +934,7 @@ fn convert_cases() -> Vec<ConvertCase> {
                 std::fs::remove_file(&f).unwrap();
                 std::fs::create_dir(&f).unwrap();
             },
-            expect: Expect::Fails(&["rgb/", ".png", "is a directory, expected an image file", "line 3"]),
+            expect: Expect::Fails(&["rgb/", ".png", "to be an image file, found a directory", "line 3"]),
         },
     ]
 }

@@ -314,7 +314,7 @@ fn bad_non_monotonic_timestamps_are_rejected() {
     assert_fails(
         &out,
         &c.out,
-        &["line 5", "must increase strictly", "is earlier than", "rgb.txt"],
+        &["line 5", "increase strictly", "is earlier than", "rgb.txt"],
     );
 }
 

@@ -1,0 +1,168 @@
+//! What `occmask process` prints after the files are done: warnings, the summary and the
+//! timings.
+
+use super::*;
+
+/// True when the input was truncated inside its messages (a cut after the data section loses
+/// only the index, which the reader rebuilds).
+pub(super) fn lost_input(rep: &ProcessReport) -> bool {
+    rep.input_truncated && !rep.input_truncation.is_some_and(|t| t.messages_intact)
+}
+
+/// One line per problem of a file that was still processed: a truncated input (what was
+/// lost) and frames skipped for their timestamps.
+pub(super) fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> {
+    let mut out = Vec::new();
+    if rep.input_truncated {
+        let lost = match &rep.input_truncation {
+            Some(t) if t.messages_intact => {
+                "no message lost (only the summary/index after the data is missing)".to_owned()
+            }
+            Some(t) => format!(
+                "the last {} bytes (an incomplete record at byte {}{}) are lost{}",
+                t.lost_bytes,
+                t.intact_bytes,
+                if t.salvaged_messages > 0 {
+                    format!(
+                        ", whose first {} complete messages were read",
+                        t.salvaged_messages
+                    )
+                } else {
+                    String::new()
+                },
+                t.lost_log_time_range
+                    .map(|(a, b)| format!(
+                        ", with the messages logged from {} to {} s",
+                        format_ns_as_seconds(a, 6),
+                        format_ns_as_seconds(b, 6)
+                    ))
+                    .unwrap_or_default()
+            ),
+            None => "its last record is incomplete".to_owned(),
+        };
+        out.push(format!(
+            "{} ends early (unfinished recording): {lost}; processed and copied every complete \
+             message ({} frames); the output's occmask.process metadata records the loss; \
+             `mcap recover` can rebuild the input's index",
+            input.display(),
+            rep.frames
+        ));
+    }
+    if let Some(anchor) = rep.anchor_frame.filter(|a| a.index > 0) {
+        out.push(format!(
+            "{}: the odometry is anchored at frame {} (t = {} s), the first the ground truth \
+             covers; the {} frames before it are in the same frame",
+            input.display(),
+            anchor.index,
+            format_ns_as_seconds(anchor.timestamp_ns, 6),
+            anchor.index
+        ));
+    }
+    if let Some(why) = &rep.anchor_skipped {
+        out.push(format!(
+            "{}: the odometry starts at the first camera, not at the ground truth: {why}",
+            input.display()
+        ));
+    }
+    if rep.out_of_order_frames > 0 {
+        out.push(format!(
+            "{}: skipped {} frame(s) whose colour stamp is not after the previous frame's \
+             (timestamps going backwards or duplicated on {})",
+            input.display(),
+            rep.out_of_order_frames,
+            rep.topics.color.topic
+        ));
+    }
+    out
+}
+
+/// `--timings`: where each file's frame loop spent its time (the pipeline should dominate).
+pub(super) fn print_timings(results: &[JobResult]) {
+    let mut out = std::io::stderr().lock();
+    let _ = writeln!(
+        out,
+        "{:<32} {:>7} {:>9} {:>8} {:>11} {:>12} {:>12}",
+        "frame loop (s)", "loop", "pipeline", "rectify", "input wait", "output wait", "writer tail"
+    );
+    for r in results {
+        if let Ok((rep, _)) = &r.outcome {
+            let t = &rep.timings;
+            let name = r
+                .input
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let _ = writeln!(
+                out,
+                "{name:<32} {:>7.3} {:>9.3} {:>8.3} {:>11.3} {:>12.3} {:>12.3}",
+                t.loop_s, t.pipeline_s, t.rectify_s, t.input_wait_s, t.output_wait_s, t.writer_tail_s
+            );
+        }
+    }
+}
+
+pub(super) fn print_summary(results: &[JobResult], jobs: &[Job], budget: &ThreadBudget) {
+    let mut out = std::io::stderr().lock();
+    let _ = writeln!(
+        out,
+        "{} file(s), {} at a time, {} compute thread(s) each ({} cores)",
+        results.len(),
+        budget.files_in_flight(),
+        budget.threads_per_file_text(),
+        available_cores()
+    );
+    let _ = writeln!(
+        out,
+        "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7} {:>7}  output",
+        "input", "frames", "unp.col", "unp.dep", "no pose", "s", "fps"
+    );
+    for r in results {
+        let name = r
+            .input
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let output = jobs
+            .iter()
+            .find(|j| j.input == r.input)
+            .map(|j| j.output.display().to_string())
+            .unwrap_or_default();
+        match &r.outcome {
+            Ok((rep, secs)) => {
+                let _ = writeln!(
+                    out,
+                    "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}{}",
+                    name,
+                    rep.frames,
+                    rep.unpaired_color,
+                    rep.unpaired_depth,
+                    rep.outside_pose_stream,
+                    secs,
+                    rep.frames as f64 / secs.max(1e-9),
+                    match &rep.input_truncation {
+                        Some(t) if t.messages_intact => "  (input truncated, no message lost)".to_owned(),
+                        Some(t) => format!("  (input truncated: last {} bytes lost)", t.lost_bytes),
+                        None => String::new(),
+                    }
+                );
+            }
+            Err(_) => {
+                let _ = writeln!(out, "{name:<32} FAILED (see below)");
+            }
+        }
+    }
+    // What was done to the images: registration and undistortion change what the pipeline
+    // saw, so they are never silent.
+    for r in results {
+        if let Ok((rep, _)) = &r.outcome {
+            if !rep.geometry.is_identity() {
+                let name = r
+                    .input
+                    .file_name()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let _ = writeln!(out, "{name}: {}", rep.geometry.describe());
+            }
+        }
+    }
+}

@@ -1,0 +1,130 @@
+//! Tests of the DVO configuration, estimator and tracker.
+
+use super::*;
+
+#[test]
+fn profiles_validate_and_differ_where_documented() {
+    DvoConfig::paper().validate().unwrap();
+    DvoConfig::release().validate().unwrap();
+    assert_eq!(DvoConfig::default(), DvoConfig::paper());
+    let r = DvoConfig::release();
+    assert!((r.k_intensity.at_level(3) - 16.0 / 255.0).abs() < 1e-6);
+    assert!((r.k_intensity.at_level(0) - 61.61 / 255.0).abs() < 1e-4);
+    assert_eq!(r.k_intensity.at_level(4), r.k_intensity.at_level(3));
+    // Too small for 5 levels: as many as fit (40×30 → 40, 20, 10 px wide).
+    assert_eq!(DvoConfig::paper().levels_for(ImageSize::new(640, 480)), 5);
+    assert_eq!(DvoConfig::paper().levels_for(ImageSize::new(40, 30)), 2);
+}
+
+#[test]
+fn ignored_pixels_are_dropped_with_at_least_the_dilation_radius() {
+    use crate::geometry::camera::presets;
+    let size = ImageSize::new(128, 96);
+    let config = DvoConfig {
+        levels: 3,
+        finest_level: 1,
+        min_gradient_per_px: 0.0,
+        ..DvoConfig::paper()
+    };
+    let gray = GrayF32::from_fn(size, |x, y| ((x * 7 + y * 3) % 11) as f32 / 11.0);
+    let mut depth = DepthMeters::filled(size, 2.0);
+    depth.set(100, 80, 0.0); // one invalid pixel: its coarse pixel keeps the other children
+    let mut pyr = ImagePyramid::new(size, presets::TUM_FR2, 3, 1).unwrap();
+    pyr.build(&gray, &depth).unwrap();
+    let mut est = DvoEstimator::new(size, config).unwrap();
+    est.prepare_reference(&pyr, None).unwrap();
+    assert_eq!(est.reference_points(1).len(), 64 * 48);
+    assert_eq!(est.reference_points(2).len(), 32 * 24);
+    // Ignore full-resolution columns 40..=59 (255 = set, as in a Mask).
+    let mask = Mask::from_fn(size, |x, _| if (40..60).contains(&x) { 255 } else { 0 });
+    est.prepare_reference(&pyr, Some(&mask)).unwrap();
+    let k1 = presets::TUM_FR2.at_level(1);
+    for p in est.reference_points(1) {
+        // Back to the level-1 column, then to full-resolution coordinates of its children.
+        let x1 = (f64::from(p.point_m[0]) / f64::from(p.point_m[2]) * k1.fx + k1.cx).round() as i64;
+        let (c0, c1) = (2 * x1, 2 * x1 + 1);
+        let gap = (40 - c1).max(c0 - 59);
+        assert!(
+            gap > 4,
+            "level-1 column {x1} is within {gap} px of the ignored band"
+        );
+    }
+    let kept = est.reference_points(1).len();
+    assert!(kept < 64 * 48 - 10 * 48, "{kept}");
+    assert!(est.reference_points(2).len() < 32 * 24 - 5 * 24);
+}
+
+#[test]
+fn validation_names_the_bad_field() {
+    let cases: Vec<(DvoConfig, &str)> = vec![
+        (
+            DvoConfig {
+                levels: 0,
+                ..DvoConfig::paper()
+            },
+            "levels",
+        ),
+        (
+            DvoConfig {
+                finest_level: DEFAULT_LEVELS,
+                ..DvoConfig::paper()
+            },
+            "finest_level",
+        ),
+        (
+            DvoConfig {
+                lm_lambda_up: 1.0,
+                ..DvoConfig::paper()
+            },
+            "lm_lambda_up",
+        ),
+        (
+            DvoConfig {
+                k_depth_m: f32::NAN,
+                ..DvoConfig::paper()
+            },
+            "k_depth_m",
+        ),
+        (
+            DvoConfig {
+                k_intensity: IntensityThreshold::Constant(0.0),
+                ..DvoConfig::paper()
+            },
+            "k_intensity",
+        ),
+        (
+            DvoConfig {
+                step_tolerance: -1.0,
+                ..DvoConfig::paper()
+            },
+            "step_tolerance",
+        ),
+        (
+            DvoConfig {
+                max_depth_m: 0.0,
+                ..DvoConfig::paper()
+            },
+            "max_depth_m",
+        ),
+        (
+            DvoConfig {
+                max_final_cost_fraction: 0.0,
+                ..DvoConfig::paper()
+            },
+            "max_final_cost_fraction",
+        ),
+        (
+            DvoConfig {
+                min_usable_pixels: 2,
+                ..DvoConfig::paper()
+            },
+            "min_usable_pixels",
+        ),
+    ];
+    for (cfg, name) in cases {
+        match cfg.validate() {
+            Err(Error::InvalidParameter { name: n, .. }) => assert_eq!(n, name),
+            other => panic!("{name}: {other:?}"),
+        }
+    }
+}
