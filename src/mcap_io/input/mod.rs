@@ -10,22 +10,26 @@
 //! - [`decode`]: channel classification and decoders for every supported flavour;
 //! - [`detect`]: choosing colour, depth, calibration and pose topics by schema;
 //! - [`transforms`]: fixed transforms between frames (`/tf_static`, `/tf`);
+//! - `source` (where the bytes come from, record size limits), `truncation` (where a damaged
+//!   file ends, what its last chunk still holds), `chunk_check` (chunk CRCs and damage reports);
 //! - [`ros2`], [`ros1`], [`json`]: the serde layouts of ROS 2 (CDR), ROS 1 and Foxglove JSON
 //!   messages.
 
 mod cdr_read;
+mod chunk_check;
 pub mod decode;
 pub mod detect;
 pub mod json;
 pub mod pixels;
 pub mod ros1;
 pub mod ros2;
+mod source;
 pub mod transforms;
+mod truncation;
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::{BufReader, Cursor, Read, Seek, SeekFrom};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use mcap::records::{MessageHeader, Record};
@@ -38,6 +42,12 @@ use mcap::sans_io::{
 use crate::error::{Error, Result};
 
 pub use decode::{ChannelType, Flavor, MessageType};
+pub use source::ReadSeek;
+pub use truncation::Truncation;
+
+use chunk_check::{check_crc, chunk_header_crc, CheckedDecompressor, SharedCrc};
+use source::{record_length_limit, Source, READ_BUFFER_BYTES};
+use truncation::find_truncation;
 
 /// A schema of the input file.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -102,267 +112,6 @@ pub enum ExtraRecord {
     },
 }
 
-/// Where an input that ends early (a recorder killed mid-write, a full disk, an interrupted
-/// copy) was cut, found by walking the record framing from the start.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-pub struct Truncation {
-    /// Bytes from the start of the file to the end of its last complete record: everything in
-    /// them was read.
-    pub intact_bytes: u64,
-    /// Bytes after that (an incomplete record): their messages are lost.
-    pub lost_bytes: u64,
-    /// True when the cut lies after the data section (only the summary, index or footer is
-    /// missing), so no message was lost.
-    pub messages_intact: bool,
-    /// Log-time range (ns) of the messages lost in the incomplete chunk, when its header
-    /// survived: from the last message salvaged from it (or its start) to its end.
-    pub lost_log_time_range: Option<(u64, u64)>,
-    /// Complete messages at the start of the incomplete chunk (the linear reader decompresses
-    /// chunks as a stream, so these were read too).
-    pub salvaged_messages: u64,
-}
-
-/// The complete records at the start of an incomplete trailing chunk at `offset` (a recorder
-/// killed while writing it): the compressed prefix is decompressed as far as it goes (zstd and
-/// lz4 decode block by block) and parsed up to the first incomplete record. Returns
-/// (opcode, body) pairs; empty when the record at `offset` is not a chunk.
-fn partial_chunk_records(source: &Source, offset: u64) -> Result<Vec<(u8, Vec<u8>)>> {
-    // Chunk header after opcode and length: start, end, uncompressed size (u64 each), CRC (u32),
-    // compression string (u32 length + bytes), compressed size (u64).
-    const FIXED_BYTES: usize = 9 + 8 + 8 + 8 + 4;
-    let mut file = source.open()?;
-    let mut buf = Vec::new();
-    file.seek(SeekFrom::Start(offset))
-        .and_then(|_| file.read_to_end(&mut buf))
-        .map_err(|e| Error::io("cannot read MCAP file", &source.path, e))?;
-    if buf.len() < FIXED_BYTES + 4 || buf[0] != mcap::records::op::CHUNK {
-        return Ok(Vec::new());
-    }
-    let u64_at = |i: usize| {
-        let mut b = [0u8; 8];
-        b.copy_from_slice(&buf[i..i + 8]);
-        u64::from_le_bytes(b)
-    };
-    let uncompressed_size = u64_at(9 + 16);
-    let mut len = [0u8; 4];
-    len.copy_from_slice(&buf[FIXED_BYTES..FIXED_BYTES + 4]);
-    let name_end = FIXED_BYTES + 4 + u32::from_le_bytes(len) as usize;
-    let data_start = name_end + 8;
-    if data_start > buf.len() {
-        return Ok(Vec::new());
-    }
-    let compression = String::from_utf8_lossy(&buf[FIXED_BYTES + 4..name_end]).into_owned();
-    let data = &buf[data_start..];
-    let mut out = Vec::new();
-    let read_partial = |mut r: Box<dyn Read + '_>, out: &mut Vec<u8>| {
-        let mut block = vec![0u8; 64 * 1024];
-        while out.len() < uncompressed_size as usize {
-            match r.read(&mut block) {
-                Ok(0) | Err(_) => break,
-                Ok(n) => out.extend_from_slice(&block[..n]),
-            }
-        }
-    };
-    match compression.as_str() {
-        "" => out.extend_from_slice(data),
-        "zstd" => {
-            if let Ok(d) = zstd::stream::read::Decoder::with_buffer(data) {
-                read_partial(Box::new(d), &mut out);
-            }
-        }
-        "lz4" => {
-            if let Ok(d) = lz4::Decoder::new(data) {
-                read_partial(Box::new(d), &mut out);
-            }
-        }
-        _ => return Ok(Vec::new()),
-    }
-    out.truncate(uncompressed_size as usize);
-    let mut records = Vec::new();
-    let mut pos = 0usize;
-    while pos + 9 <= out.len() {
-        let mut len = [0u8; 8];
-        len.copy_from_slice(&out[pos + 1..pos + 9]);
-        let Ok(len) = usize::try_from(u64::from_le_bytes(len)) else {
-            break;
-        };
-        let Some(end) = (pos + 9).checked_add(len).filter(|&e| e <= out.len()) else {
-            break;
-        };
-        let opcode = out[pos];
-        // Only records that parse are kept (the decompressed tail may be garbage).
-        if mcap::parse_record(opcode, &out[pos + 9..end]).is_err() {
-            break;
-        }
-        records.push((opcode, out[pos + 9..end].to_vec()));
-        pos = end;
-    }
-    Ok(records)
-}
-
-/// Walks the top-level record framing (opcode, length, body) without reading bodies, and
-/// returns where the last complete record ends, whether the data section was complete, and
-/// the log-time range of an incomplete trailing chunk.
-fn find_truncation(source: &Source, file_len: u64) -> Result<Truncation> {
-    const MAGIC_BYTES: u64 = 8;
-    const PREFIX_BYTES: u64 = 9;
-    // Chunk body: message_start_time, message_end_time (u64 each) come first.
-    const CHUNK_TIMES_BYTES: usize = 16;
-    let mut file = BufReader::with_capacity(64 * 1024, source.open()?);
-    let io = |e| Error::io("cannot read MCAP file", &source.path, e);
-    file.seek(SeekFrom::Start(MAGIC_BYTES)).map_err(io)?;
-    let mut pos = MAGIC_BYTES;
-    let mut messages_intact = false;
-    loop {
-        let mut prefix = [0u8; PREFIX_BYTES as usize];
-        if pos + PREFIX_BYTES > file_len {
-            break;
-        }
-        file.read_exact(&mut prefix).map_err(io)?;
-        let opcode = prefix[0];
-        let mut len = [0u8; 8];
-        len.copy_from_slice(&prefix[1..]);
-        let len = u64::from_le_bytes(len);
-        let end = pos.saturating_add(PREFIX_BYTES).saturating_add(len);
-        if end > file_len {
-            let mut lost_log_time_range = None;
-            let mut salvaged_messages = 0;
-            if opcode == mcap::records::op::CHUNK && len >= CHUNK_TIMES_BYTES as u64 {
-                let mut times = [0u8; CHUNK_TIMES_BYTES];
-                if file.read_exact(&mut times).is_ok() {
-                    let mut start = u64::from_le_bytes(times[..8].try_into().unwrap_or([0; 8]));
-                    let end = u64::from_le_bytes(times[8..].try_into().unwrap_or([0; 8]));
-                    for (op, body) in partial_chunk_records(source, pos)? {
-                        if let Ok(Record::Message { header, .. }) = mcap::parse_record(op, &body) {
-                            salvaged_messages += 1;
-                            start = start.max(header.log_time);
-                        }
-                    }
-                    lost_log_time_range = Some((start, end));
-                }
-            }
-            return Ok(Truncation {
-                intact_bytes: pos,
-                lost_bytes: file_len - pos,
-                messages_intact,
-                lost_log_time_range,
-                salvaged_messages,
-            });
-        }
-        if opcode == mcap::records::op::DATA_END {
-            messages_intact = true;
-        }
-        file.seek_relative(len as i64).map_err(io)?;
-        pos = end;
-    }
-    Ok(Truncation {
-        intact_bytes: pos,
-        lost_bytes: file_len - pos,
-        messages_intact,
-        lost_log_time_range: None,
-        salvaged_messages: 0,
-    })
-}
-
-/// Buffer size of the linear reader's file reads.
-const READ_BUFFER_BYTES: usize = 1 << 20;
-
-/// Smallest limit on one record or decompressed chunk, whatever the file size. Recorders write
-/// chunks of a few MiB (ours 4 MiB) and the largest single RGB-D message is a raw 4K frame of
-/// ~25 MB; a compressed chunk may decompress to more than the whole file, so the limit is not
-/// just the file length.
-const MIN_RECORD_LENGTH_LIMIT_BYTES: u64 = 256 << 20;
-
-/// The longest record (or decompressed chunk) the MCAP readers accept in a file of `file_len`
-/// bytes. Without a limit the mcap readers allocate whatever length a corrupt record declares
-/// (found by fuzzing: 8e18 bytes from a 2.5 kB file, fuzz/README.md).
-fn record_length_limit(file_len: u64) -> usize {
-    usize::try_from(file_len.max(MIN_RECORD_LENGTH_LIMIT_BYTES)).unwrap_or(usize::MAX)
-}
-
-/// Where an [`McapInput`] reads its bytes, and the name its messages give it.
-struct Source {
-    /// The file's path, or the name given to a reader.
-    path: PathBuf,
-    /// `None`: the file at `path`, opened again for each pass (passes may overlap).
-    reader: Option<SharedReader>,
-}
-
-/// Any seekable byte source an [`McapInput`] can read ([`std::fs::File`],
-/// [`std::io::Cursor`] over bytes, ...).
-pub trait ReadSeek: Read + Seek + Send {}
-
-impl<T: Read + Seek + Send> ReadSeek for T {}
-
-/// A reader shared by the passes over it; each pass keeps its own position.
-type SharedReader = Arc<Mutex<Box<dyn ReadSeek>>>;
-
-/// One pass over a [`Source`].
-enum SourceReader {
-    File(File),
-    Shared { reader: SharedReader, position: u64 },
-}
-
-fn poisoned() -> std::io::Error {
-    std::io::Error::other("another reader of the same MCAP input panicked")
-}
-
-impl Read for SourceReader {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        match self {
-            SourceReader::File(f) => f.read(buf),
-            SourceReader::Shared { reader, position } => {
-                let mut r = reader.lock().map_err(|_| poisoned())?;
-                r.seek(SeekFrom::Start(*position))?;
-                let n = r.read(buf)?;
-                *position += n as u64;
-                Ok(n)
-            }
-        }
-    }
-}
-
-impl Seek for SourceReader {
-    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
-        match self {
-            SourceReader::File(f) => f.seek(to),
-            SourceReader::Shared { reader, position } => {
-                let target = match to {
-                    SeekFrom::Start(n) => Some(n),
-                    SeekFrom::Current(d) => position.checked_add_signed(d),
-                    SeekFrom::End(_) => Some(reader.lock().map_err(|_| poisoned())?.seek(to)?),
-                };
-                *position = target.ok_or_else(|| {
-                    std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the start")
-                })?;
-                Ok(*position)
-            }
-        }
-    }
-}
-
-impl Source {
-    /// Starts a pass at the beginning.
-    fn open(&self) -> Result<SourceReader> {
-        match &self.reader {
-            None => open_file(&self.path).map(SourceReader::File),
-            Some(reader) => Ok(SourceReader::Shared {
-                reader: Arc::clone(reader),
-                position: 0,
-            }),
-        }
-    }
-
-    /// The length in bytes.
-    fn len(&self, pass: &mut SourceReader) -> Result<u64> {
-        let len = match pass {
-            SourceReader::File(f) => f.metadata().map(|m| m.len()),
-            SourceReader::Shared { .. } => pass.seek(SeekFrom::End(0)),
-        };
-        len.map_err(|e| Error::io("cannot stat MCAP file", &self.path, e))
-    }
-}
-
 /// An open input MCAP file (or any seekable reader, [`McapInput::from_reader`]).
 pub struct McapInput {
     source: Source,
@@ -383,14 +132,6 @@ fn mcap_error(path: &Path, message: impl Into<String>) -> Error {
         path: path.to_owned(),
         message: message.into(),
     }
-}
-
-fn open_file(path: &Path) -> Result<File> {
-    // Opening a directory succeeds on Unix; reading it then fails with a vaguer message.
-    if path.is_dir() {
-        return Err(mcap_error(path, "expected an MCAP file, found a directory"));
-    }
-    File::open(path).map_err(|e| Error::io("cannot open MCAP file", path, e))
 }
 
 /// Reads the summary with the sans-IO summary reader (seeks to the footer; bounded memory).
@@ -892,129 +633,6 @@ impl McapInput {
             }
         }
         Ok(())
-    }
-}
-
-/// CRC of the last chunk a [`CheckedDecompressor`] decompressed, shared with the reading loop.
-type SharedCrc = Arc<std::sync::Mutex<Option<u32>>>;
-
-/// Decompresses whole zstd or lz4 chunks (the indexed reader hands over a complete chunk and
-/// an output buffer of its declared size) and records the CRC-32 of the output, so the
-/// chunk's CRC is checked for compressed chunks too: a flipped bit that still decompresses
-/// would otherwise go unnoticed.
-struct CheckedDecompressor {
-    name: &'static str,
-    crc: SharedCrc,
-}
-
-impl mcap::sans_io::decompressor::Decompressor for CheckedDecompressor {
-    fn next_read_size(&self) -> usize {
-        0
-    }
-
-    fn decompress(
-        &mut self,
-        src: &[u8],
-        dst: &mut [u8],
-    ) -> mcap::McapResult<mcap::sans_io::decompressor::DecompressResult> {
-        let bad = |e: std::io::Error| mcap::McapError::DecompressionError(format!("{} data: {e}", self.name));
-        let wrote = if self.name == "zstd" {
-            zstd::bulk::Decompressor::new()
-                .and_then(|mut d| d.decompress_to_buffer(src, dst))
-                .map_err(bad)?
-        } else {
-            let mut decoder = lz4::Decoder::new(src).map_err(bad)?;
-            decoder.read_exact(dst).map_err(bad)?;
-            dst.len()
-        };
-        if let Ok(mut crc) = self.crc.lock() {
-            *crc = Some(crc32fast::hash(&dst[..wrote]));
-        }
-        Ok(mcap::sans_io::decompressor::DecompressResult {
-            consumed: src.len(),
-            wrote,
-        })
-    }
-
-    fn reset(&mut self) -> mcap::McapResult<()> {
-        Ok(())
-    }
-
-    fn name(&self) -> &'static str {
-        self.name
-    }
-}
-
-/// Byte offset of the uncompressed-data CRC inside a chunk record: opcode, record length,
-/// message start and end time, uncompressed size.
-const CHUNK_CRC_OFFSET: usize = 1 + 8 + 8 + 8 + 8;
-
-/// Checks a chunk record's header and returns the CRC of its uncompressed data (0 = not
-/// computed, per the MCAP specification).
-fn chunk_header_crc(header: &[u8]) -> std::result::Result<u32, String> {
-    if header.len() < CHUNK_CRC_OFFSET + 4 || header[0] != mcap::records::op::CHUNK {
-        return Err("expected a chunk record at the offset its index gives".into());
-    }
-    let mut crc = [0u8; 4];
-    crc.copy_from_slice(&header[CHUNK_CRC_OFFSET..CHUNK_CRC_OFFSET + 4]);
-    Ok(u32::from_le_bytes(crc))
-}
-
-fn check_crc(expected: u32, found: Option<u32>) -> std::result::Result<(), String> {
-    match found {
-        Some(found) if expected != 0 && found != expected => Err(format!(
-            "CRC mismatch: expected {expected:#010x} from the chunk header, computed {found:#010x} \
-             from its data"
-        )),
-        _ => Ok(()),
-    }
-}
-
-impl McapInput {
-    /// Messages a chunk holds, from its message index records (which follow the chunk, so they
-    /// usually survive damage to it); `None` when they cannot be read.
-    fn chunk_message_count(&self, index: &mcap::records::ChunkIndex) -> Option<u64> {
-        // Message index record: opcode, record length, channel ID (u16), then the byte length of
-        // its (log time, offset) pairs of 16 bytes each.
-        const PREFIX_BYTES: usize = 1 + 8 + 2 + 4;
-        const ENTRY_BYTES: u64 = 16;
-        let mut file = self.source.open().ok()?;
-        let mut total = 0;
-        for offset in index.message_index_offsets.values() {
-            let mut prefix = [0u8; PREFIX_BYTES];
-            file.seek(SeekFrom::Start(*offset)).ok()?;
-            file.read_exact(&mut prefix).ok()?;
-            if prefix[0] != mcap::records::op::MESSAGE_INDEX {
-                return None;
-            }
-            let mut len = [0u8; 4];
-            len.copy_from_slice(&prefix[11..15]);
-            total += u64::from(u32::from_le_bytes(len)) / ENTRY_BYTES;
-        }
-        Some(total)
-    }
-
-    fn chunk_error(&self, index: Option<&mcap::records::ChunkIndex>, what: &str) -> Error {
-        let place = match index {
-            Some(c) => format!(
-                "chunk at byte {}{} (messages logged from {} to {} s, compression {:?})",
-                c.chunk_start_offset,
-                self.chunk_message_count(c)
-                    .map(|n| format!(" holding {n} messages"))
-                    .unwrap_or_default(),
-                crate::time::format_ns_as_seconds(c.message_start_time, 6),
-                crate::time::format_ns_as_seconds(c.message_end_time, 6),
-                c.compression
-            ),
-            None => "a chunk".to_owned(),
-        };
-        mcap_error(
-            self.path(),
-            format!(
-                "damaged {place}: {what}; the other chunks are intact (`mcap recover` copies them to a \
-                 new file)"
-            ),
-        )
     }
 }
 
