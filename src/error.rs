@@ -118,12 +118,12 @@ pub enum Error {
     },
 
     /// The MCAP container is not usable (not MCAP, a directory, damaged chunks, ...).
-    #[error("{message} ({})", path.display())]
-    Dataset {
+    #[error("{problem} ({})", path.display())]
+    BadMcap {
         /// The file.
         path: PathBuf,
-        /// What was expected and what was found.
-        message: String,
+        /// What is wrong with it.
+        problem: McapProblem,
     },
 
     /// A parameter is outside its valid range.
@@ -138,12 +138,28 @@ pub enum Error {
     },
 
     /// An MCAP message could not be decoded.
-    #[error("topic {topic}: {message}")]
+    #[error(
+        "topic {topic}: {}{problem}",
+        at.as_ref().map(|at| format!("{at}: ")).unwrap_or_default()
+    )]
     Decode {
         /// The channel's topic.
         topic: String,
+        /// Which message, when the caller knows it.
+        at: Option<MessageAt>,
         /// What was expected and what was found.
-        message: String,
+        problem: DecodeProblem,
+    },
+
+    /// A message could not be encoded for writing.
+    #[error("topic {topic}: cannot encode {what}: {reason}")]
+    Encode {
+        /// The channel's topic (or `channel N` when only its id is known).
+        topic: String,
+        /// What was encoded ("message", "stats").
+        what: &'static str,
+        /// The encoder's reason.
+        reason: String,
     },
 
     /// A calibration's camera matrix K is not a pinhole matrix.
@@ -357,12 +373,13 @@ pub enum Error {
     },
 
     /// The operating system refused to start worker threads.
-    #[error("cannot start a pool of {threads} worker thread(s): {message}")]
+    // The cause is part of the message and deliberately not a `source()` (as for `Io`).
+    #[error("cannot start a pool of {threads} worker thread(s): {cause}")]
     ThreadPool {
         /// Threads asked for.
         threads: usize,
-        /// The reason given.
-        message: String,
+        /// The thread pool's error.
+        cause: rayon::ThreadPoolBuildError,
     },
 }
 
@@ -411,6 +428,23 @@ impl Mismatch {
 }
 
 impl Error {
+    /// Builds an [`Error::Decode`] for a message of `topic` (the caller may add which one).
+    pub fn decode(topic: impl Into<String>, problem: DecodeProblem) -> Self {
+        Error::Decode {
+            topic: topic.into(),
+            at: None,
+            problem,
+        }
+    }
+
+    /// Builds an [`Error::BadMcap`] for `path`.
+    pub fn bad_mcap(path: impl Into<PathBuf>, problem: McapProblem) -> Self {
+        Error::BadMcap {
+            path: path.into(),
+            problem,
+        }
+    }
+
     /// Builds an [`Error::Io`] for `path`.
     pub fn io(action: impl Into<String>, path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
@@ -507,4 +541,238 @@ pub enum PoseRole {
     /// The odometry anchor.
     #[error("anchor topic")]
     Anchor,
+}
+
+/// Which message of a channel an error is about, as a player shows it ([`Error::Decode`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MessageAt {
+    /// The message's log time, nanoseconds.
+    pub log_time_ns: u64,
+    /// Its sequence number.
+    pub sequence: u32,
+}
+
+impl std::fmt::Display for MessageAt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "message at log time {} s (sequence {})",
+            crate::time::format_ns_as_seconds(self.log_time_ns, 6),
+            self.sequence
+        )
+    }
+}
+
+/// What kind of image an encoding was refused for ([`DecodeProblem::UnsupportedEncoding`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum ImageKind {
+    /// A colour (or grey) image.
+    #[error("colour")]
+    Color,
+    /// A depth image.
+    #[error("depth")]
+    Depth,
+    /// A mask.
+    #[error("mask")]
+    Mask,
+}
+
+/// Why a message could not be decoded ([`Error::Decode`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DecodeProblem {
+    /// The channel's schema or message type is not one that serves here.
+    #[error(transparent)]
+    Schema(Mismatch),
+    /// The bytes are not a valid message of the channel's type.
+    #[error("expected a {serialization} {message_type}: {reason}")]
+    Malformed {
+        /// The serialization ("protobuf", "JSON", "CDR", "ROS 1").
+        serialization: &'static str,
+        /// The message type.
+        message_type: &'static str,
+        /// The deserializer's reason.
+        reason: String,
+    },
+    /// A field holds a value outside its range (a stamp, a pose).
+    #[error(transparent)]
+    Value(Mismatch),
+    /// The image's encoding (or compressed format) is not one that can be read.
+    #[error("unsupported {image} encoding {found:?}: supported are {supported}")]
+    UnsupportedEncoding {
+        /// What the image is for.
+        image: ImageKind,
+        /// The encoding or format string found.
+        found: String,
+        /// The encodings that can be read.
+        supported: &'static str,
+    },
+    /// A raw image with no pixels.
+    #[error("image is {size}: expected at least one pixel")]
+    EmptyImage {
+        /// The size declared.
+        size: ImageSize,
+    },
+    /// A raw image's row step is shorter than a row of pixels.
+    #[error("image step {step} is shorter than a {}-pixel row of {row_bytes} bytes", size.width)]
+    RowStep {
+        /// The size declared.
+        size: ImageSize,
+        /// The row step declared, bytes.
+        step: usize,
+        /// Bytes of a row of pixels.
+        row_bytes: usize,
+    },
+    /// A raw image's data length disagrees with its size, step and encoding (`found < needed`:
+    /// truncated).
+    #[error("{}", describe_image_length(*size, *step, *bytes_per_pixel, *needed, *full, *found))]
+    ImageLength {
+        /// The size declared.
+        size: ImageSize,
+        /// The row step declared, bytes.
+        step: usize,
+        /// Bytes per pixel of the encoding.
+        bytes_per_pixel: usize,
+        /// Bytes needed when the last row has no padding.
+        needed: usize,
+        /// Bytes of `height` whole rows of `step` bytes.
+        full: usize,
+        /// Bytes found.
+        found: usize,
+    },
+    /// A compressed image (PNG, JPEG, compressed depth) cannot be decoded.
+    #[error("cannot decode {what}: {reason}")]
+    Undecodable {
+        /// The image ("png image", the compressed-depth format, ...).
+        what: String,
+        /// The decoder's reason.
+        reason: String,
+    },
+    /// A compressed image's header or declared size is not what its format allows.
+    #[error("{what}: {mismatch}")]
+    Compressed {
+        /// The image ("png image", the compressed-depth format, ...).
+        what: String,
+        /// What was expected and found.
+        mismatch: Mismatch,
+    },
+}
+
+/// The message of [`DecodeProblem::ImageLength`].
+fn describe_image_length(
+    size: ImageSize,
+    step: usize,
+    bytes_per_pixel: usize,
+    needed: usize,
+    full: usize,
+    found: usize,
+) -> String {
+    let expected = if needed == full {
+        format!("{needed}")
+    } else {
+        format!("{needed} or {full}")
+    };
+    format!(
+        "image {size} with step {step} and {bytes_per_pixel} bytes per pixel needs {expected} bytes, found \
+         {found} (width, height, step or encoding disagree with the data)"
+    )
+}
+
+/// Why an MCAP container is not usable ([`Error::BadMcap`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum McapProblem {
+    /// The path is a directory.
+    #[error("expected an MCAP file, found a directory")]
+    Directory,
+    /// The file does not start with the MCAP magic bytes.
+    #[error("not an MCAP file (expected the magic bytes \\x89MCAP0\\r\\n at the start)")]
+    NoMagic,
+    /// The magic is not followed by a header record.
+    #[error("MCAP file does not start with a header record")]
+    NoHeader,
+    /// A metadata or attachment index gives a record span outside the file.
+    #[error("metadata or attachment index points outside the file")]
+    IndexOutsideFile {
+        /// The span's offset, bytes.
+        offset: u64,
+        /// Its length, bytes.
+        length: u64,
+    },
+    /// A metadata or attachment index points at a record of another kind.
+    #[error("metadata or attachment index points at another record")]
+    IndexWrongRecord {
+        /// The record's offset, bytes.
+        offset: u64,
+    },
+    /// A chunk is damaged (the rest of the file is intact).
+    #[error(
+        "damaged {}: {damage}; the other chunks are intact (`mcap recover` copies them to a new file)",
+        chunk.as_ref().map_or_else(|| "a chunk".to_owned(), ToString::to_string)
+    )]
+    DamagedChunk {
+        /// Where the chunk is and what it held, when its index is known.
+        chunk: Option<Box<ChunkPlace>>,
+        /// What is wrong with it.
+        damage: ChunkDamage,
+    },
+}
+
+/// Where a damaged chunk is and what it held ([`McapProblem::DamagedChunk`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChunkPlace {
+    /// Offset of the chunk record, bytes.
+    pub start_offset: u64,
+    /// Messages it holds, from its message indexes (`None` when they cannot be read).
+    pub messages: Option<u64>,
+    /// Log time of its first message, nanoseconds.
+    pub message_start_time_ns: u64,
+    /// Log time of its last message, nanoseconds.
+    pub message_end_time_ns: u64,
+    /// Its compression ("" for none).
+    pub compression: String,
+}
+
+impl std::fmt::Display for ChunkPlace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "chunk at byte {}", self.start_offset)?;
+        if let Some(n) = self.messages {
+            write!(f, " holding {n} messages")?;
+        }
+        write!(
+            f,
+            " (messages logged from {} to {} s, compression {:?})",
+            crate::time::format_ns_as_seconds(self.message_start_time_ns, 6),
+            crate::time::format_ns_as_seconds(self.message_end_time_ns, 6),
+            self.compression
+        )
+    }
+}
+
+/// What is wrong with a damaged chunk ([`McapProblem::DamagedChunk`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ChunkDamage {
+    /// The chunk index points past the end of the file.
+    #[error("its index points past the end of the file")]
+    PastEnd,
+    /// No chunk record at the offset the index gives.
+    #[error("expected a chunk record at the offset its index gives")]
+    NotAChunk,
+    /// The data does not decompress (or the compression is unknown).
+    #[error("{reason}")]
+    Decompression {
+        /// The MCAP reader's reason.
+        reason: String,
+    },
+    /// The data's CRC is not the one in the chunk header.
+    #[error(
+        "CRC mismatch: expected {expected:#010x} from the chunk header, computed {computed:#010x} from its data"
+    )]
+    CrcMismatch {
+        /// The CRC in the chunk header.
+        expected: u32,
+        /// The CRC of the data.
+        computed: u32,
+    },
 }

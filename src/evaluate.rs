@@ -16,11 +16,13 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::error::{Error, Result};
+use crate::error::{DecodeProblem, Error, ImageKind, Result};
 use crate::image_buf::{ImageSize, Mask, MASK_SET};
 use crate::mcap_io::annotate::{TOPIC_MASK, TOPIC_ODOMETRY};
 use crate::mcap_io::encoding::ColorEncoding;
-use crate::mcap_io::input::decode::{decode_image, read_poses, ImagePayload};
+use crate::mcap_io::input::decode::{
+    decode_image, read_poses, unsupported_schema, ImagePayload, IMAGE_SCHEMA,
+};
 use crate::mcap_io::input::{McapInput, Truncation};
 use crate::mcap_io::{TOPIC_GROUNDTRUTH_MASK, TOPIC_GROUNDTRUTH_POSE};
 use crate::metrics::segmentation::{SegmentationSummary, SegmentationTally};
@@ -97,38 +99,59 @@ pub struct EvalReport {
 
 fn mask_from_message(input: &McapInput, channel_id: u16, data: &[u8]) -> Result<(u64, Mask)> {
     let channel = &input.channels()[&channel_id];
-    let ct = channel.channel_type.ok_or_else(|| Error::Decode {
-        topic: channel.topic.clone(),
-        message: format!("unsupported schema {:?} for a mask", channel.schema_name),
-    })?;
+    let ct = channel
+        .channel_type
+        .ok_or_else(|| unsupported_schema(channel, IMAGE_SCHEMA))?;
     let msg = decode_image(ct, &channel.topic, data)?;
-    let ImagePayload::Raw {
-        width,
-        height,
-        encoding,
-        step,
-        data,
-        ..
-    } = &msg.payload
-    else {
-        return Err(Error::Decode {
-            topic: channel.topic.clone(),
-            message: "expected an uncompressed mono8 mask, found a compressed image".into(),
-        });
+    let unsupported = |found: &str| {
+        Error::decode(
+            channel.topic.clone(),
+            DecodeProblem::UnsupportedEncoding {
+                image: ImageKind::Mask,
+                found: found.to_owned(),
+                supported: "mono8 (uncompressed)",
+            },
+        )
+    };
+    let (width, height, encoding, step, data) = match &msg.payload {
+        ImagePayload::Raw {
+            width,
+            height,
+            encoding,
+            step,
+            data,
+            ..
+        } => (width, height, encoding, step, data),
+        ImagePayload::Compressed { format, .. } => return Err(unsupported(format)),
     };
     if encoding.parse::<ColorEncoding>() != Ok(ColorEncoding::Mono8) {
-        return Err(Error::Decode {
-            topic: channel.topic.clone(),
-            message: format!("expected a mono8 mask, found encoding {encoding:?}"),
-        });
+        return Err(unsupported(encoding));
     }
     let size = ImageSize::new(*width as usize, *height as usize);
     let step = *step as usize;
-    if step < size.width || data.len() < step * size.height.saturating_sub(1) + size.width {
-        return Err(Error::Decode {
-            topic: channel.topic.clone(),
-            message: format!("mask {size} with step {step} has only {} bytes", data.len()),
-        });
+    if step < size.width {
+        return Err(Error::decode(
+            channel.topic.clone(),
+            DecodeProblem::RowStep {
+                size,
+                step,
+                row_bytes: size.width,
+            },
+        ));
+    }
+    let needed = step * size.height.saturating_sub(1) + size.width;
+    if data.len() < needed {
+        return Err(Error::decode(
+            channel.topic.clone(),
+            DecodeProblem::ImageLength {
+                size,
+                step,
+                bytes_per_pixel: 1,
+                needed,
+                full: step * size.height,
+                found: data.len(),
+            },
+        ));
     }
     let mask = Mask::from_fn(size, |x, y| if data[y * step + x] != 0 { MASK_SET } else { 0 });
     Ok((msg.timestamp_ns, mask))

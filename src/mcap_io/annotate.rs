@@ -427,9 +427,10 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
 
     fn write_proto<M: Encode>(&mut self, channel_id: u16, log_time_ns: u64, msg: &M) -> Result<()> {
         self.scratch.clear();
-        msg.encode(&mut self.scratch).map_err(|e| Error::Decode {
+        msg.encode(&mut self.scratch).map_err(|e| Error::Encode {
             topic: format!("channel {channel_id}"),
-            message: format!("cannot encode message: {e}"),
+            what: "message",
+            reason: e.to_string(),
         })?;
         self.write_new(channel_id, log_time_ns, None)
     }
@@ -531,9 +532,10 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
             self.write_proto(id, t, &msg)?;
         }
 
-        let json = serde_json::to_vec(frame.stats).map_err(|e| Error::Decode {
+        let json = serde_json::to_vec(frame.stats).map_err(|e| Error::Encode {
             topic: TOPIC_STATS.into(),
-            message: format!("cannot encode stats: {e}"),
+            what: "stats",
+            reason: e.to_string(),
         })?;
         self.write_new(self.channels.stats, t, Some(&json))?;
         Ok(())

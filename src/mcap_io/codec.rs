@@ -9,7 +9,7 @@ use foxglove::messages::{
 use nalgebra::Isometry3;
 use prost::bytes::Bytes;
 
-use crate::error::{Error, Result};
+use crate::error::{DecodeProblem, Error, Mismatch, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::geometry::distortion::LensDistortion;
 use crate::image_buf::{ImageSize, Mask, Rgb8};
@@ -205,13 +205,6 @@ fn check_len(len: usize, size: ImageSize) -> Result<()> {
     Ok(())
 }
 
-fn decode_error(topic: &str, message: impl Into<String>) -> Error {
-    Error::Decode {
-        topic: topic.to_owned(),
-        message: message.into(),
-    }
-}
-
 /// Pinhole intrinsics from a row-major 3×3 camera matrix `k`, shared by every calibration
 /// decoder.
 ///
@@ -252,16 +245,27 @@ pub fn decode_compressed_pixels(
     what: &str,
 ) -> Result<::image::DynamicImage> {
     let reader = || ::image::ImageReader::with_format(std::io::Cursor::new(data), format);
-    let cannot = |e: ::image::ImageError| decode_error(topic, format!("cannot decode {what}: {e}"));
+    let cannot = |e: ::image::ImageError| {
+        Error::decode(
+            topic,
+            DecodeProblem::Undecodable {
+                what: what.to_owned(),
+                reason: e.to_string(),
+            },
+        )
+    };
     let (width, height) = reader().into_dimensions().map_err(cannot)?;
     let pixels = u64::from(width) * u64::from(height);
     if pixels == 0 || pixels > MAX_COMPRESSED_IMAGE_PIXELS {
-        return Err(decode_error(
+        return Err(Error::decode(
             topic,
-            format!(
-                "{what} declares {width}x{height} pixels: expected between 1 and \
-                 {MAX_COMPRESSED_IMAGE_PIXELS} pixels"
-            ),
+            DecodeProblem::Compressed {
+                what: what.to_owned(),
+                mismatch: Mismatch::new(
+                    format!("between 1 and {MAX_COMPRESSED_IMAGE_PIXELS} pixels"),
+                    format!("{width}x{height} pixels declared"),
+                ),
+            },
         ));
     }
     reader().decode().map_err(cannot)

@@ -230,9 +230,10 @@ impl<W: Write + Seek> RgbdMcapWriter<W> {
         msg: &M,
     ) -> Result<()> {
         self.scratch.clear();
-        msg.encode(&mut self.scratch).map_err(|e| Error::Decode {
+        msg.encode(&mut self.scratch).map_err(|e| Error::Encode {
             topic: topic.to_owned(),
-            message: format!("cannot encode message: {e}"),
+            what: "message",
+            reason: e.to_string(),
         })?;
         let state = self.channel_for(topic, kind)?;
         let header = MessageHeader {

@@ -126,10 +126,7 @@ where
                 .num_threads(threads)
                 .thread_name(move |i| format!("occmask-file{slot}-{i}"))
                 .build()
-                .map_err(|e| Error::ThreadPool {
-                    threads,
-                    message: e.to_string(),
-                })
+                .map_err(|cause| Error::ThreadPool { threads, cause })
         })
         .collect::<Result<Vec<_>>>()?;
     let next = AtomicUsize::new(0);

@@ -37,6 +37,7 @@ use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8};
 use crate::mcap_io::annotate::{
     AnnotatedWriter, METADATA_ODOMETRY_ANCHOR, METADATA_PROCESS, METADATA_PROCESSOR_CONFIG,
 };
+use crate::mcap_io::input::decode::{unsupported_schema, IMAGE_SCHEMA};
 use crate::mcap_io::input::detect::detect_topics;
 use crate::mcap_io::input::McapInput;
 use crate::mcap_io::DEPTH_UNITS_KEY;
@@ -77,7 +78,9 @@ use threads::{write_ops, BufferPool, OutputQueue, Prefetched, WriteOp};
 /// pipeline).
 ///
 /// # Errors
-/// [`Error::Dataset`] for missing channels; [`Error::MissingCalibration`],
+/// [`Error::BadMcap`] for a file that is not a usable MCAP; [`Error::NoTopic`],
+/// [`Error::AmbiguousTopic`] and [`Error::UnknownTopic`] for channels that cannot be chosen;
+/// [`Error::MissingCalibration`],
 /// [`Error::CalibrationSize`], [`Error::BadDepthUnits`], [`Error::NoPoses`],
 /// [`Error::AnchorPoses`], [`Error::DepthNotRegistered`] and [`Error::MissingTransform`] for
 /// what the file lacks (the CLI names the flag that supplies it); [`Error::Decode`] for
@@ -195,14 +198,10 @@ pub fn process_file<W: Write + Seek + Send>(
     }
     writer.write_metadata(METADATA_PROCESS, metadata)?;
 
-    let color_ct = topics.color.channel_type.ok_or_else(|| Error::Decode {
-        topic: topics.color.topic.clone(),
-        message: "unsupported schema".into(),
-    })?;
-    let depth_ct = topics.depth.channel_type.ok_or_else(|| Error::Decode {
-        topic: topics.depth.topic.clone(),
-        message: "unsupported schema".into(),
-    })?;
+    let color_ct =
+        (topics.color.channel_type).ok_or_else(|| unsupported_schema(&topics.color, IMAGE_SCHEMA))?;
+    let depth_ct =
+        (topics.depth.channel_type).ok_or_else(|| unsupported_schema(&topics.depth, IMAGE_SCHEMA))?;
     let copy = config.annotate.copy_input;
     let read_topics: Option<Vec<String>> = if copy {
         None

@@ -9,7 +9,7 @@
 use nalgebra::Isometry3;
 
 use crate::error::{Error, PoseRole, Result};
-use crate::mcap_io::input::decode::{decode_poses, read_poses};
+use crate::mcap_io::input::decode::{decode_poses, read_poses, unsupported_schema, POSE_SCHEMA};
 use crate::mcap_io::input::detect::{RgbdTopics, TopicOverrides};
 use crate::mcap_io::input::McapInput;
 use crate::trajectory::{interpolate, StampedPose};
@@ -89,10 +89,9 @@ fn load_external_poses(
     let Some(channel) = &topics.pose else {
         return Err(Error::MissingPoseTopic);
     };
-    let ct = channel.channel_type.ok_or_else(|| Error::Decode {
-        topic: channel.topic.clone(),
-        message: "unsupported pose schema".into(),
-    })?;
+    let ct = channel
+        .channel_type
+        .ok_or_else(|| unsupported_schema(channel, POSE_SCHEMA))?;
     let mut child = config.pose_child_frame.clone();
     let mut poses = Vec::new();
     input.for_each_message(Some(std::slice::from_ref(&channel.topic)), None, |m| {

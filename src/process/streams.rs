@@ -4,11 +4,11 @@
 
 use std::time::Instant;
 
-use crate::error::{CalibrationGap, Error, Result};
+use crate::error::{CalibrationGap, Error, MessageAt, Result};
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8};
 use crate::mcap_io::input::decode::{
     decode_calibration, decode_image, depth_from_image_into, gray_from_image_into, rgb_from_image_into,
-    CalibrationMsg,
+    unsupported_schema, CalibrationMsg, IMAGE_SCHEMA,
 };
 use crate::mcap_io::input::detect::RgbdTopics;
 use crate::mcap_io::input::{ChannelType, InputChannel, McapInput, RawMessage};
@@ -26,13 +26,13 @@ use super::threads::BufferPool;
 /// decode error, so the user can find the frame.
 pub(super) fn at_message(error: Error, header: &mcap::records::MessageHeader) -> Error {
     match error {
-        Error::Decode { topic, message } => Error::Decode {
+        Error::Decode { topic, problem, .. } => Error::Decode {
             topic,
-            message: format!(
-                "message at log time {} s (sequence {}): {message}",
-                crate::time::format_ns_as_seconds(header.log_time, 6),
-                header.sequence
-            ),
+            at: Some(MessageAt {
+                log_time_ns: header.log_time,
+                sequence: header.sequence,
+            }),
+            problem,
         },
         other => other,
     }
@@ -81,10 +81,9 @@ pub(super) fn first_image_info(
     is_color: bool,
     depth_units_per_meter: f64,
 ) -> Result<StreamInfo> {
-    let ct = channel.channel_type.ok_or_else(|| Error::Decode {
-        topic: channel.topic.clone(),
-        message: "unsupported schema".into(),
-    })?;
+    let ct = channel
+        .channel_type
+        .ok_or_else(|| unsupported_schema(channel, IMAGE_SCHEMA))?;
     let Some(first) = input.first_message(channel.id)? else {
         return Ok(StreamInfo {
             frame_id: String::new(),

@@ -13,7 +13,7 @@ use std::path::Path;
 use foxglove::messages as fm;
 use prost::Message as _;
 
-use occmask::error::TopicRole;
+use occmask::error::{DecodeProblem, ImageKind, McapProblem, TopicRole};
 use occmask::mcap_io::annotate::{
     AnnotateOptions, FRAME_CAMERA_ESTIMATED, TOPIC_ACCUMULATION, TOPIC_ANCHOR_PATH, TOPIC_MASK,
     TOPIC_MASK_ANNOTATIONS, TOPIC_ODOMETRY, TOPIC_PATH, TOPIC_POINTS, TOPIC_STATS, TOPIC_TF_FALLBACK,
@@ -474,9 +474,13 @@ fn errors_name_what_to_fix() {
         ..Default::default()
     };
     let path = write_input(dir.path(), Flavor::Ros2, &spec);
-    let err = run(&path, &ProcessConfig::default()).unwrap_err().to_string();
+    let err = run(&path, &ProcessConfig::default()).unwrap_err();
     assert!(
-        err.contains("nv12") && err.contains("bgr8") && err.contains(COLOR_TOPIC),
+        matches!(&err, occmask::Error::Decode {
+            topic,
+            at: Some(_),
+            problem: DecodeProblem::UnsupportedEncoding { image: ImageKind::Color, found, supported },
+        } if topic == COLOR_TOPIC && found == "nv12" && supported.contains("bgr8")),
         "{err}"
     );
 
@@ -553,8 +557,17 @@ fn errors_name_what_to_fix() {
     // Not an MCAP file.
     let junk = dir.path().join("junk.mcap");
     std::fs::write(&junk, b"hello world, definitely not mcap").unwrap();
-    let err = run(&junk, &ProcessConfig::default()).unwrap_err().to_string();
-    assert!(err.contains("not an MCAP file"), "{err}");
+    let err = run(&junk, &ProcessConfig::default()).unwrap_err();
+    assert!(
+        matches!(
+            &err,
+            occmask::Error::BadMcap {
+                problem: McapProblem::NoMagic,
+                ..
+            }
+        ),
+        "{err}"
+    );
 }
 
 #[test]
@@ -761,8 +774,12 @@ mod geometry {
             &[0, 1, 0, 0, 7],
             "garbage.mcap",
         );
-        let err = run(&garbage, &ProcessConfig::default()).unwrap_err().to_string();
-        assert!(err.contains(rig_names::TF_STATIC), "{err}");
+        let err = run(&garbage, &ProcessConfig::default()).unwrap_err();
+        assert!(
+            matches!(&err, occmask::Error::Decode { topic, problem: occmask::error::DecodeProblem::Malformed { .. }, .. }
+                if topic == rig_names::TF_STATIC),
+            "{err}"
+        );
     }
 
     /// What the pipeline was given for one frame.

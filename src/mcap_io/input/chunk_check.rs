@@ -4,8 +4,8 @@
 use std::io::{Read, Seek, SeekFrom};
 use std::sync::Arc;
 
-use super::{mcap_error, McapInput};
-use crate::error::Error;
+use super::McapInput;
+use crate::error::{ChunkDamage, ChunkPlace, Error, McapProblem};
 
 /// CRC of the last chunk a [`CheckedDecompressor`] decompressed, shared with the reading loop.
 pub(super) type SharedCrc = Arc<std::sync::Mutex<Option<u32>>>;
@@ -63,21 +63,20 @@ const CHUNK_CRC_OFFSET: usize = 1 + 8 + 8 + 8 + 8;
 
 /// Checks a chunk record's header and returns the CRC of its uncompressed data (0 = not
 /// computed, per the MCAP specification).
-pub(super) fn chunk_header_crc(header: &[u8]) -> std::result::Result<u32, String> {
+pub(super) fn chunk_header_crc(header: &[u8]) -> std::result::Result<u32, ChunkDamage> {
     if header.len() < CHUNK_CRC_OFFSET + 4 || header[0] != mcap::records::op::CHUNK {
-        return Err("expected a chunk record at the offset its index gives".into());
+        return Err(ChunkDamage::NotAChunk);
     }
     let mut crc = [0u8; 4];
     crc.copy_from_slice(&header[CHUNK_CRC_OFFSET..CHUNK_CRC_OFFSET + 4]);
     Ok(u32::from_le_bytes(crc))
 }
 
-pub(super) fn check_crc(expected: u32, found: Option<u32>) -> std::result::Result<(), String> {
+pub(super) fn check_crc(expected: u32, found: Option<u32>) -> std::result::Result<(), ChunkDamage> {
     match found {
-        Some(found) if expected != 0 && found != expected => Err(format!(
-            "CRC mismatch: expected {expected:#010x} from the chunk header, computed {found:#010x} \
-             from its data"
-        )),
+        Some(computed) if expected != 0 && computed != expected => {
+            Err(ChunkDamage::CrcMismatch { expected, computed })
+        }
         _ => Ok(()),
     }
 }
@@ -106,26 +105,20 @@ impl McapInput {
         Some(total)
     }
 
-    pub(super) fn chunk_error(&self, index: Option<&mcap::records::ChunkIndex>, what: &str) -> Error {
-        let place = match index {
-            Some(c) => format!(
-                "chunk at byte {}{} (messages logged from {} to {} s, compression {:?})",
-                c.chunk_start_offset,
-                self.chunk_message_count(c)
-                    .map(|n| format!(" holding {n} messages"))
-                    .unwrap_or_default(),
-                crate::time::format_ns_as_seconds(c.message_start_time, 6),
-                crate::time::format_ns_as_seconds(c.message_end_time, 6),
-                c.compression
-            ),
-            None => "a chunk".to_owned(),
-        };
-        mcap_error(
-            self.path(),
-            format!(
-                "damaged {place}: {what}; the other chunks are intact (`mcap recover` copies them to a \
-                 new file)"
-            ),
-        )
+    pub(super) fn chunk_error(
+        &self,
+        index: Option<&mcap::records::ChunkIndex>,
+        damage: ChunkDamage,
+    ) -> Error {
+        let chunk = index.map(|c| {
+            Box::new(ChunkPlace {
+                start_offset: c.chunk_start_offset,
+                messages: self.chunk_message_count(c),
+                message_start_time_ns: c.message_start_time,
+                message_end_time_ns: c.message_end_time,
+                compression: c.compression.clone(),
+            })
+        });
+        Error::bad_mcap(self.path(), McapProblem::DamagedChunk { chunk, damage })
     }
 }

@@ -4,7 +4,7 @@
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
-use crate::error::{Error, Result};
+use crate::error::{DecodeProblem, Error, ImageKind, Mismatch, Result};
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::geometry::distortion::{CameraModel, LensDistortion};
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8, LUMA_WEIGHTS_BT601};
@@ -250,39 +250,49 @@ pub struct PoseSample {
     pub parent_from_child: Isometry3<f64>,
 }
 
-pub(crate) fn decode_error(topic: &str, message: impl Into<String>) -> Error {
-    Error::Decode {
-        topic: topic.to_owned(),
-        message: message.into(),
-    }
+/// [`Error::Decode`] for `topic`: `expected` and `found` as a [`DecodeProblem::Value`].
+pub(crate) fn bad_value(topic: &str, expected: impl Into<String>, found: impl Into<String>) -> Error {
+    Error::decode(topic, DecodeProblem::Value(Mismatch::new(expected, found)))
 }
 
-fn proto<T: prost::Message + Default>(data: &[u8], topic: &str, what: &str) -> Result<T> {
-    T::decode(data).map_err(|e| decode_error(topic, format!("expected a protobuf {what}: {e}")))
+/// [`Error::Decode`] for bytes that are not a `serialization` `message_type`.
+fn malformed(
+    topic: &str,
+    serialization: &'static str,
+    message_type: &'static str,
+    reason: impl ToString,
+) -> Error {
+    Error::decode(
+        topic,
+        DecodeProblem::Malformed {
+            serialization,
+            message_type,
+            reason: reason.to_string(),
+        },
+    )
 }
 
-fn from_json<'a, T: serde::Deserialize<'a>>(data: &'a [u8], topic: &str, what: &str) -> Result<T> {
-    serde_json::from_slice(data).map_err(|e| decode_error(topic, format!("expected a JSON {what}: {e}")))
+fn proto<T: prost::Message + Default>(data: &[u8], topic: &str, what: &'static str) -> Result<T> {
+    T::decode(data).map_err(|e| malformed(topic, "protobuf", what, e))
 }
 
-fn from_cdr<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str) -> Result<T> {
+fn from_json<'a, T: serde::Deserialize<'a>>(data: &'a [u8], topic: &str, what: &'static str) -> Result<T> {
+    serde_json::from_slice(data).map_err(|e| malformed(topic, "JSON", what, e))
+}
+
+fn from_cdr<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &'static str) -> Result<T> {
     // Reads the 4-byte encapsulation header (little- or big-endian XCDR1), then the fields,
     // checking declared lengths against the message before allocating (cdr_read.rs).
-    super::cdr_read::from_bytes::<T>(data)
-        .map_err(|e| decode_error(topic, format!("expected a CDR {what}: {e}")))
+    super::cdr_read::from_bytes::<T>(data).map_err(|e| malformed(topic, "CDR", what, e))
 }
 
-fn from_ros1<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &str) -> Result<T> {
-    super::cdr_read::from_ros1_bytes::<T>(data)
-        .map_err(|e| decode_error(topic, format!("expected a ROS 1 {what}: {e}")))
+fn from_ros1<T: serde::de::DeserializeOwned>(data: &[u8], topic: &str, what: &'static str) -> Result<T> {
+    super::cdr_read::from_ros1_bytes::<T>(data).map_err(|e| malformed(topic, "ROS 1", what, e))
 }
 
 fn ros1_ns(t: ros1::Time, topic: &str) -> Result<u64> {
     if t.nsecs >= 1_000_000_000 {
-        return Err(decode_error(
-            topic,
-            format!("expected stamp nsecs < 1e9, found {}", t.nsecs),
-        ));
+        return Err(bad_value(topic, "stamp nsecs < 1e9", t.nsecs.to_string()));
     }
     Ok(join_ns(u64::from(t.secs), t.nsecs))
 }
@@ -295,31 +305,22 @@ fn json_ns(t: json::Time, topic: &str) -> Result<u64> {
     let nsec = u32::try_from(t.nsec)
         .ok()
         .filter(|&n| n < 1_000_000_000)
-        .ok_or_else(|| decode_error(topic, format!("expected timestamp nsec < 1e9, found {}", t.nsec)))?;
+        .ok_or_else(|| bad_value(topic, "timestamp nsec < 1e9", t.nsec.to_string()))?;
     // JSON seconds are 64-bit: 2^64 ns is only ~584 years, so a corrupt stamp must not wrap.
     checked_join_ns(t.sec, nsec).ok_or_else(|| {
-        decode_error(
+        bad_value(
             topic,
-            format!(
-                "expected a timestamp below 2^64 ns (about 1.8e10 s), found sec = {}",
-                t.sec
-            ),
+            "a timestamp below 2^64 ns (about 1.8e10 s)",
+            format!("sec = {}", t.sec),
         )
     })
 }
 
 fn ros_ns(t: ros2::Time, topic: &str) -> Result<u64> {
-    let sec = u64::try_from(t.sec).map_err(|_| {
-        decode_error(
-            topic,
-            format!("expected a non-negative stamp, found sec = {}", t.sec),
-        )
-    })?;
+    let sec = u64::try_from(t.sec)
+        .map_err(|_| bad_value(topic, "a non-negative stamp", format!("sec = {}", t.sec)))?;
     if t.nanosec >= 1_000_000_000 {
-        return Err(decode_error(
-            topic,
-            format!("expected stamp nanosec < 1e9, found {}", t.nanosec),
-        ));
+        return Err(bad_value(topic, "stamp nanosec < 1e9", t.nanosec.to_string()));
     }
     Ok(join_ns(sec, t.nanosec))
 }
@@ -483,10 +484,7 @@ pub fn decode_image(ct: ChannelType, topic: &str, data: &[u8]) -> Result<ImageMs
             from_ros1::<ros1::CompressedImage>(data, topic, ros1::names::COMPRESSED_IMAGE)?,
             topic,
         ),
-        _ => Err(decode_error(
-            topic,
-            format!("expected an image channel, found {:?}", ct.message),
-        )),
+        _ => Err(wrong_channel(topic, "an image channel", ct)),
     }
 }
 
@@ -526,10 +524,7 @@ pub fn decode_calibration(ct: ChannelType, topic: &str, data: &[u8]) -> Result<C
             from_ros1::<ros1::CameraInfo>(data, topic, ros1::names::CAMERA_INFO)?,
             topic,
         ),
-        _ => Err(decode_error(
-            topic,
-            format!("expected a calibration channel, found {:?}", ct.message),
-        )),
+        _ => Err(wrong_channel(topic, "a calibration channel", ct)),
     }
 }
 
@@ -542,11 +537,10 @@ fn isometry(topic: &str, t: [f64; 3], q: [f64; 4]) -> Result<Isometry3<f64>> {
     const MAX_QUATERNION_NORM_ERROR: f64 = 1e-3;
     if !t.iter().all(|v| v.is_finite()) || !norm.is_finite() || (norm - 1.0).abs() > MAX_QUATERNION_NORM_ERROR
     {
-        return Err(decode_error(
+        return Err(bad_value(
             topic,
-            format!(
-                "expected a finite translation and a unit quaternion, found t = {t:?}, q (x,y,z,w) = {q:?}"
-            ),
+            "a finite translation and a unit quaternion",
+            format!("t = {t:?}, q (x,y,z,w) = {q:?}"),
         ));
     }
     Ok(Isometry3::from_parts(
@@ -658,17 +652,42 @@ pub fn decode_poses(ct: ChannelType, topic: &str, data: &[u8]) -> Result<Vec<Pos
                 .map(|t| ros_transform(t, topic))
                 .collect()
         }
-        _ => Err(decode_error(
-            topic,
-            format!("expected a pose or transform channel, found {:?}", ct.message),
-        )),
+        _ => Err(wrong_channel(topic, "a pose or transform channel", ct)),
     }
 }
 
-fn unsupported(topic: &str, what: &str, found: &str, supported: &str) -> Error {
-    decode_error(
+/// [`Error::Decode`] for a channel whose message type is not the `expected` one.
+fn wrong_channel(topic: &str, expected: &str, ct: ChannelType) -> Error {
+    Error::decode(
         topic,
-        format!("unsupported {what} encoding {found:?}: supported are {supported}"),
+        DecodeProblem::Schema(Mismatch::new(expected, format!("{:?}", ct.message))),
+    )
+}
+
+/// What [`unsupported_schema`] says an image channel needs.
+pub(crate) const IMAGE_SCHEMA: &str = "an image schema";
+/// What [`unsupported_schema`] says a pose channel needs.
+pub(crate) const POSE_SCHEMA: &str = "a pose schema";
+
+/// [`Error::Decode`] for a channel whose schema cannot be decoded as `expected` at all.
+pub(crate) fn unsupported_schema(channel: &super::InputChannel, expected: &str) -> Error {
+    Error::decode(
+        channel.topic.clone(),
+        DecodeProblem::Schema(Mismatch::new(
+            expected,
+            format!("schema {:?}", channel.schema_name),
+        )),
+    )
+}
+
+fn unsupported(topic: &str, image: ImageKind, found: &str, supported: &'static str) -> Error {
+    Error::decode(
+        topic,
+        DecodeProblem::UnsupportedEncoding {
+            image,
+            found: found.to_owned(),
+            supported,
+        },
     )
 }
 
@@ -688,10 +707,7 @@ pub fn read_poses(input: &super::McapInput, topic: &str) -> Result<Vec<crate::tr
         return Ok(Vec::new());
     };
     let Some(ct) = channel.channel_type.filter(|ct| ct.is_pose()) else {
-        return Err(Error::Decode {
-            topic: topic.into(),
-            message: format!("expected a pose schema, found {:?}", channel.schema_name),
-        });
+        return Err(unsupported_schema(channel, POSE_SCHEMA));
     };
     let mut poses = Vec::new();
     input.for_each_message(Some(&[topic.to_owned()]), None, |m| {

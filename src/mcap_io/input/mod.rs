@@ -39,7 +39,7 @@ use mcap::sans_io::{
     LinearReaderOptions, SummaryReadEvent, SummaryReader, SummaryReaderOptions,
 };
 
-use crate::error::{Error, Result};
+use crate::error::{ChunkDamage, Error, McapProblem, Result};
 
 pub use decode::{ChannelType, Flavor, MessageType};
 pub use source::ReadSeek;
@@ -127,13 +127,6 @@ pub struct McapInput {
     file_len: u64,
 }
 
-fn mcap_error(path: &Path, message: impl Into<String>) -> Error {
-    Error::Dataset {
-        path: path.to_owned(),
-        message: message.into(),
-    }
-}
-
 /// Reads the summary with the sans-IO summary reader (seeks to the footer; bounded memory).
 fn read_summary(file: &mut impl ReadSeek, file_len: u64, path: &Path) -> Result<Option<mcap::Summary>> {
     let mut reader = SummaryReader::new_with_options(
@@ -179,24 +172,21 @@ fn read_profile(file: &mut impl ReadSeek, path: &Path) -> Result<String> {
         }
     }
     if filled < prefix.len() || &prefix[..MAGIC_BYTES] != mcap::MAGIC {
-        return Err(mcap_error(
-            path,
-            "not an MCAP file (expected the magic bytes \\x89MCAP0\\r\\n at the start)",
-        ));
+        return Err(Error::bad_mcap(path, McapProblem::NoMagic));
     }
     let opcode = prefix[MAGIC_BYTES];
     let mut len_bytes = [0u8; 8];
     len_bytes.copy_from_slice(&prefix[MAGIC_BYTES + 1..]);
     let len = u64::from_le_bytes(len_bytes);
     if opcode != mcap::records::op::HEADER || len > MAX_HEADER_BYTES {
-        return Err(mcap_error(path, "MCAP file does not start with a header record"));
+        return Err(Error::bad_mcap(path, McapProblem::NoHeader));
     }
     let mut body = vec![0u8; len as usize];
     file.read_exact(&mut body)
         .map_err(|e| Error::io("cannot read MCAP header", path, e))?;
     match mcap::parse_record(opcode, &body)? {
         Record::Header(h) => Ok(h.profile),
-        _ => Err(mcap_error(path, "MCAP file does not start with a header record")),
+        _ => Err(Error::bad_mcap(path, McapProblem::NoHeader)),
     }
 }
 
@@ -244,7 +234,7 @@ impl McapInput {
     /// summary (or no chunk indexes).
     ///
     /// # Errors
-    /// [`Error::Io`] when the file cannot be read; [`Error::Dataset`] when it is not MCAP;
+    /// [`Error::Io`] when the file cannot be read; [`Error::BadMcap`] when it is not MCAP;
     /// [`Error::Mcap`] for corrupt records.
     pub fn open(path: &Path) -> Result<Self> {
         Self::from_source(Source {
@@ -495,9 +485,9 @@ impl McapInput {
         for (offset, length) in spans {
             const RECORD_PREFIX_BYTES: u64 = 9;
             if length < RECORD_PREFIX_BYTES || offset.saturating_add(length) > self.file_len {
-                return Err(mcap_error(
+                return Err(Error::bad_mcap(
                     self.path(),
-                    "metadata or attachment index points outside the file",
+                    McapProblem::IndexOutsideFile { offset, length },
                 ));
             }
             let mut buf = vec![0u8; length as usize];
@@ -514,9 +504,9 @@ impl McapInput {
                     data: data.into_owned(),
                 }),
                 _ => {
-                    return Err(mcap_error(
+                    return Err(Error::bad_mcap(
                         self.path(),
-                        "metadata or attachment index points at another record",
+                        McapProblem::IndexWrongRecord { offset },
                     ))
                 }
             }
@@ -595,7 +585,7 @@ impl McapInput {
                     let start = index.map_or(offset, |c| c.chunk_start_offset);
                     let header_len = (offset - start) as usize;
                     if offset.saturating_add(length as u64) > self.file_len {
-                        return Err(self.chunk_error(index, "its index points past the end of the file"));
+                        return Err(self.chunk_error(index, ChunkDamage::PastEnd));
                     }
                     chunk.resize(header_len + length, 0);
                     file.seek(SeekFrom::Start(start))
@@ -604,22 +594,27 @@ impl McapInput {
                     let (header, data) = chunk.split_at(header_len);
                     let expected_crc = match index {
                         Some(index) => {
-                            chunk_header_crc(header).map_err(|m| self.chunk_error(Some(index), &m))?
+                            chunk_header_crc(header).map_err(|d| self.chunk_error(Some(index), d))?
                         }
                         None => 0,
                     };
                     if let Ok(mut c) = crc.lock() {
                         *c = None;
                     }
-                    reader
-                        .insert_chunk_record_data(offset, data)
-                        .map_err(|e| self.chunk_error(index, &e.to_string()))?;
+                    reader.insert_chunk_record_data(offset, data).map_err(|e| {
+                        self.chunk_error(
+                            index,
+                            ChunkDamage::Decompression {
+                                reason: e.to_string(),
+                            },
+                        )
+                    })?;
                     let found = if index.is_some_and(|i| i.compression.is_empty()) {
                         Some(crc32fast::hash(data))
                     } else {
                         crc.lock().ok().and_then(|c| *c)
                     };
-                    check_crc(expected_crc, found).map_err(|m| self.chunk_error(index, &m))?;
+                    check_crc(expected_crc, found).map_err(|d| self.chunk_error(index, d))?;
                 }
                 IndexedReadEvent::Message { header, data } => {
                     let keep_going = f(RawMessage {

@@ -6,8 +6,7 @@ use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use super::mcap_error;
-use crate::error::{Error, Result};
+use crate::error::{Error, McapProblem, Result};
 
 /// Buffer size of the linear reader's file reads.
 pub(super) const READ_BUFFER_BYTES: usize = 1 << 20;
@@ -111,7 +110,7 @@ impl Source {
 pub(super) fn open_file(path: &Path) -> Result<File> {
     // Opening a directory succeeds on Unix; reading it then fails with a vaguer message.
     if path.is_dir() {
-        return Err(mcap_error(path, "expected an MCAP file, found a directory"));
+        return Err(Error::bad_mcap(path, McapProblem::Directory));
     }
     File::open(path).map_err(|e| Error::io("cannot open MCAP file", path, e))
 }

@@ -20,49 +20,36 @@ pub(super) fn raw_rows(
     let size = ImageSize::new(width as usize, height as usize);
     if size.area() == 0 {
         // A 0×N image would pass the length checks with no data and loop over N empty rows.
-        return Err(decode_error(
-            topic,
-            format!("image is {size}: expected at least one pixel"),
-        ));
+        return Err(Error::decode(topic, DecodeProblem::EmptyImage { size }));
     }
     let row_bytes = size.width * bpp;
     let step = step as usize;
     if step < row_bytes {
-        return Err(decode_error(
+        return Err(Error::decode(
             topic,
-            format!(
-                "image step {step} is shorter than a {}-pixel row of {row_bytes} bytes",
-                size.width
-            ),
+            DecodeProblem::RowStep {
+                size,
+                step,
+                row_bytes,
+            },
         ));
     }
-    let needed = if size.height == 0 {
-        0
-    } else {
-        step * (size.height - 1) + row_bytes
-    };
+    let needed = step * (size.height - 1) + row_bytes;
     // The data is `height` rows of `step` bytes; writers that trim the last row's padding are
     // accepted too. Anything else means width, height, step or encoding disagree with the data
     // (e.g. 32-bit float depth declared as 16UC1).
     let full = step * size.height;
     if len != needed && len != full {
-        let expected = if needed == full {
-            format!("{needed}")
-        } else {
-            format!("{needed} or {full}")
-        };
-        return Err(decode_error(
+        return Err(Error::decode(
             topic,
-            format!(
-                "image {size} with step {step} and {bpp} bytes per pixel needs {expected} bytes, found {len} \
-                 (width, height, step or encoding disagree with the data)"
-            ),
-        ));
-    }
-    if size.area() == 0 {
-        return Err(decode_error(
-            topic,
-            format!("expected an image with at least one pixel, found {size}"),
+            DecodeProblem::ImageLength {
+                size,
+                step,
+                bytes_per_pixel: bpp,
+                needed,
+                full,
+                found: len,
+            },
         ));
     }
     Ok(size)
@@ -166,7 +153,7 @@ pub(super) fn raw_color(
 ) -> Result<(ColorEncoding, ImageSize)> {
     let color: ColorEncoding = encoding
         .parse()
-        .map_err(|_| unsupported(topic, "colour", encoding, SUPPORTED_COLOR_ENCODINGS))?;
+        .map_err(|_| unsupported(topic, ImageKind::Color, encoding, SUPPORTED_COLOR_ENCODINGS))?;
     let size = raw_rows(topic, width, height, step, color.bytes_per_pixel(), data.len())?;
     Ok((color, size))
 }
@@ -175,7 +162,7 @@ pub(super) fn raw_color(
 pub(super) fn color_image_format(topic: &str, format: &str) -> Result<image::ImageFormat> {
     ColorFormat::from_transport_format(format)
         .map(ColorFormat::image_format)
-        .ok_or_else(|| unsupported(topic, "colour", format, SUPPORTED_COLOR_ENCODINGS))
+        .ok_or_else(|| unsupported(topic, ImageKind::Color, format, SUPPORTED_COLOR_ENCODINGS))
 }
 
 /// Offsets of red, green and blue in an interleaved pixel of `color` (`None` for the packed
@@ -291,7 +278,7 @@ pub fn depth_from_image_into(
         } => {
             let depth_encoding: DepthEncoding = encoding
                 .parse()
-                .map_err(|_| unsupported(topic, "depth", encoding, SUPPORTED_DEPTH_ENCODINGS))?;
+                .map_err(|_| unsupported(topic, ImageKind::Depth, encoding, SUPPORTED_DEPTH_ENCODINGS))?;
             let bpp = depth_encoding.bytes_per_pixel();
             let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
             resize_for(depth_m, size);
@@ -325,16 +312,14 @@ pub fn depth_from_image_into(
         ImagePayload::Compressed { format, data } => {
             let compressed: CompressedDepthFormat = format
                 .parse()
-                .map_err(|_| unsupported(topic, "depth", format, SUPPORTED_DEPTH_ENCODINGS))?;
+                .map_err(|_| unsupported(topic, ImageKind::Depth, format, SUPPORTED_DEPTH_ENCODINGS))?;
             let raw = compressed.depth == DepthEncoding::U16;
             let Some((header, payload)) = data.split_at_checked(COMPRESSED_DEPTH_HEADER_BYTES) else {
-                return Err(decode_error(
+                return Err(compressed_error(
                     topic,
-                    format!(
-                        "{format}: {} bytes, expected a {COMPRESSED_DEPTH_HEADER_BYTES}-byte header and \
-                         the compressed image",
-                        data.len()
-                    ),
+                    format,
+                    format!("a {COMPRESSED_DEPTH_HEADER_BYTES}-byte header and the compressed image"),
+                    format!("{} bytes", data.len()),
                 ));
             };
             let (size, values) = if compressed.codec == DepthCodec::Rvl {
@@ -372,13 +357,16 @@ pub fn depth_from_image_into(
 /// The image size and values of a `compressedDepth rvl` payload (after the config header):
 /// width and height (`u32` each), then the RVL stream.
 pub(super) fn rvl_values(payload: &[u8], topic: &str, format: &str) -> Result<(ImageSize, Vec<u16>)> {
-    let bad = |what: String| decode_error(topic, format!("{format}: {what}"));
     let Some((dims, stream)) = payload.split_at_checked(pixels::RVL_SIZE_HEADER_BYTES) else {
-        return Err(bad(format!(
-            "{} bytes after the header, expected the {}-byte RVL size and the stream",
-            payload.len(),
-            pixels::RVL_SIZE_HEADER_BYTES
-        )));
+        return Err(compressed_error(
+            topic,
+            format,
+            format!(
+                "the {}-byte RVL size and the stream",
+                pixels::RVL_SIZE_HEADER_BYTES
+            ),
+            format!("{} bytes after the header", payload.len()),
+        ));
     };
     let dim = |at: usize| u32::from_le_bytes([dims[at], dims[at + 1], dims[at + 2], dims[at + 3]]);
     let size = ImageSize::new(dim(0) as usize, dim(4) as usize);
@@ -387,14 +375,42 @@ pub(super) fn rvl_values(payload: &[u8], topic: &str, format: &str) -> Result<(I
         .saturating_mul(pixels::RVL_MAX_PIXELS_PER_BYTE)
         .min(crate::mcap_io::codec::MAX_COMPRESSED_IMAGE_PIXELS);
     if pixels_declared == 0 || pixels_declared > most {
-        return Err(bad(format!(
-            "RVL image of {size} from {} bytes: expected at least one pixel and at most {most} \
-             (5 pixels per byte, {} in all)",
-            stream.len(),
-            crate::mcap_io::codec::MAX_COMPRESSED_IMAGE_PIXELS
-        )));
+        return Err(compressed_error(
+            topic,
+            format,
+            format!(
+                "at least one pixel and at most {most} (5 pixels per byte, {} in all)",
+                crate::mcap_io::codec::MAX_COMPRESSED_IMAGE_PIXELS
+            ),
+            format!("an RVL image of {size} from {} bytes", stream.len()),
+        ));
     }
     let mut values = vec![0u16; size.area()];
-    pixels::decode_rvl(stream, &mut values).map_err(bad)?;
+    pixels::decode_rvl(stream, &mut values).map_err(|reason| {
+        Error::decode(
+            topic,
+            DecodeProblem::Undecodable {
+                what: format.to_owned(),
+                reason,
+            },
+        )
+    })?;
     Ok((size, values))
+}
+
+/// [`Error::Decode`] for a compressed image whose header or declared size is not what `format`
+/// allows.
+fn compressed_error(
+    topic: &str,
+    format: &str,
+    expected: impl Into<String>,
+    found: impl Into<String>,
+) -> Error {
+    Error::decode(
+        topic,
+        DecodeProblem::Compressed {
+            what: format.to_owned(),
+            mismatch: Mismatch::new(expected, found),
+        },
+    )
 }

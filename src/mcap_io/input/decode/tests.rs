@@ -195,11 +195,19 @@ fn compressed_depth_rvl_and_inverse_depth_decode() {
         1.0,
         &mut d,
     )
-    .unwrap_err()
-    .to_string();
-    assert!(err.contains("100000x100000") && err.contains("/d"), "{err}");
+    .unwrap_err();
+    assert!(
+        matches!(&err, Error::Decode { topic, problem: DecodeProblem::Compressed { mismatch, .. }, .. }
+            if topic == "/d" && mismatch.found.contains("100000x100000")),
+        "{err}"
+    );
     let short = compressed_depth("16UC1; compressedDepth rvl", [0.0; 2], vec![1, 2]);
-    assert!(depth_from_image_into(&short, "/d", 1.0, &mut d).is_err());
+    let err = depth_from_image_into(&short, "/d", 1.0, &mut d).unwrap_err();
+    assert!(
+        matches!(&err, Error::Decode { problem: DecodeProblem::Compressed { what, .. }, .. }
+            if what == "16UC1; compressedDepth rvl"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -283,18 +291,24 @@ fn compressed_depth_png_32fc1_is_inverse_depth() {
 #[test]
 fn unsupported_encodings_are_named() {
     let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
-    let err = gray_from_image_into(&raw("nv12", 2, 2, vec![0; 4]), "/c", &mut g)
-        .unwrap_err()
-        .to_string();
+    let err = gray_from_image_into(&raw("nv12", 2, 2, vec![0; 4]), "/c", &mut g).unwrap_err();
     assert!(
-        err.contains("nv12") && err.contains("rgb8") && err.contains("/c"),
+        matches!(&err, Error::Decode {
+            topic,
+            problem: DecodeProblem::UnsupportedEncoding { image: ImageKind::Color, found, supported },
+            ..
+        } if topic == "/c" && found == "nv12" && supported.contains("rgb8")),
         "{err}"
     );
     let mut d = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
-    let err = depth_from_image_into(&raw("8UC1", 2, 1, vec![0; 2]), "/d", 1.0, &mut d)
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("8UC1") && err.contains("32FC1"), "{err}");
+    let err = depth_from_image_into(&raw("8UC1", 2, 1, vec![0; 2]), "/d", 1.0, &mut d).unwrap_err();
+    assert!(
+        matches!(&err, Error::Decode {
+            problem: DecodeProblem::UnsupportedEncoding { image: ImageKind::Depth, found, supported },
+            ..
+        } if found == "8UC1" && supported.contains("32FC1")),
+        "{err}"
+    );
 }
 
 #[test]
@@ -314,9 +328,10 @@ fn zero_sized_raw_images_are_rejected_before_any_row_loop() {
         },
     };
     let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
-    let err = gray_from_image_into(&msg, "/c", &mut g).unwrap_err().to_string();
+    let err = gray_from_image_into(&msg, "/c", &mut g).unwrap_err();
     assert!(
-        err.contains("/c") && err.contains("0x4294967295") && err.contains("at least one pixel"),
+        matches!(&err, Error::Decode { topic, problem: DecodeProblem::EmptyImage { size }, .. }
+            if topic == "/c" && *size == ImageSize::new(0, u32::MAX as usize)),
         "{err}"
     );
 }
@@ -346,10 +361,12 @@ fn compressed_images_declaring_huge_sizes_are_rejected_before_decoding() {
         },
     };
     let mut g = GrayF32::filled(ImageSize::new(1, 1), 0.0);
-    let err = gray_from_image_into(&msg(header(20_000, 20_000)), "/c", &mut g)
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("20000x20000") && err.contains("/c"), "{err}");
+    let err = gray_from_image_into(&msg(header(20_000, 20_000)), "/c", &mut g).unwrap_err();
+    assert!(
+        matches!(&err, Error::Decode { topic, problem: DecodeProblem::Compressed { mismatch, .. }, .. }
+            if topic == "/c" && mismatch.found.contains("20000x20000")),
+        "{err}"
+    );
     // The same header with the real 1×1 size still decodes.
     gray_from_image_into(&msg(header(1, 1)), "/c", &mut g).unwrap();
     assert_eq!(g.size(), ImageSize::new(1, 1));
@@ -404,9 +421,10 @@ fn json_stamps_beyond_u64_nanoseconds_are_errors_not_wrapped() {
     let ct = ChannelType::classify("foxglove.PoseInFrame", "json").unwrap();
     let text = br#"{"timestamp":{"sec":18446744073709551615,"nsec":0},"frame_id":"w",
         "pose":{"position":{"x":0,"y":0,"z":0},"orientation":{"x":0,"y":0,"z":0,"w":1}}}"#;
-    let err = decode_poses(ct, "/p", text).unwrap_err().to_string();
+    let err = decode_poses(ct, "/p", text).unwrap_err();
     assert!(
-        err.contains("18446744073709551615") && err.contains("/p"),
+        matches!(&err, Error::Decode { topic, problem: DecodeProblem::Value(m), .. }
+            if topic == "/p" && m.found.contains("18446744073709551615")),
         "{err}"
     );
 }
@@ -451,4 +469,31 @@ fn tf_message_yields_every_transform() {
     assert_eq!(poses.len(), 2);
     assert_eq!(poses[1].child_frame.as_deref(), Some("b"));
     assert_eq!(poses[1].parent_from_child.translation.vector.x, 2.0);
+}
+
+#[test]
+fn truncated_raw_images_are_image_length_errors() {
+    // 16UC1 declared, 8-bit data: half the bytes a 2×1 image needs.
+    let mut d = DepthMeters::filled(ImageSize::new(1, 1), 0.0);
+    let err = depth_from_image_into(&raw("16UC1", 2, 2, vec![0; 2]), "/d", 1.0, &mut d).unwrap_err();
+    assert!(
+        matches!(
+            &err,
+            Error::Decode {
+                problem: DecodeProblem::ImageLength {
+                    needed: 4,
+                    found: 2,
+                    bytes_per_pixel: 2,
+                    ..
+                },
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert_eq!(
+        err.to_string(),
+        "topic /d: image 2x1 with step 4 and 2 bytes per pixel needs 4 bytes, found 2 (width, height, \
+         step or encoding disagree with the data)"
+    );
 }
