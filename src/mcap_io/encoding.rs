@@ -3,8 +3,11 @@
 //! `sensor_msgs/CompressedImage`) are parsed here and nowhere else, and every writer takes its
 //! string from here.
 //!
-//! A new encoding is a variant here (its names in `FromStr` and `as_str`, its bytes per pixel)
-//! and its pixel conversion in [`crate::mcap_io::input::decode`].
+//! A new depth encoding is a variant here and nothing else: its names (`FromStr`, `as_str`),
+//! bytes per pixel, unit scale and conversion of a row to metres are all [`DepthEncoding`]'s
+//! (and [`CompressedDepthFormat`]'s when it can be compressed); the pixel decoding in
+//! [`crate::mcap_io::input::decode`] only calls them. A new colour encoding is a variant here
+//! and its pixel conversion there.
 
 use std::fmt;
 use std::str::FromStr;
@@ -136,6 +139,62 @@ impl DepthEncoding {
             DepthEncoding::F32 => 4,
         }
     }
+
+    /// Metres per stored unit: `1 / units_per_meter` for sensor units (in f32, as
+    /// `image_buf::depth_m_from_u16_into` computes it, so depth decoded from MCAP equals depth
+    /// read from dataset files bit for bit); 1 for encodings in metres, which ignore it.
+    pub fn metres_per_unit(self, units_per_meter: f64) -> f32 {
+        match self {
+            DepthEncoding::U16 => 1.0 / units_per_meter as f32,
+            DepthEncoding::F32 => 1.0,
+        }
+    }
+
+    /// Converts rows of raw pixels to metres (0 = no measurement). Each item is one image row
+    /// of [`Self::bytes_per_pixel`] bytes a pixel, in the byte order `big_endian` gives, and its
+    /// output row; `metres_per_unit` comes from [`Self::metres_per_unit`]. The encoding and
+    /// byte order are matched once for all rows, so the pixel loops have no branch on them.
+    pub fn metres_from_rows<'a>(
+        self,
+        rows: impl Iterator<Item = (&'a [u8], &'a mut [f32])>,
+        big_endian: bool,
+        metres_per_unit: f32,
+    ) {
+        match (self, big_endian) {
+            (DepthEncoding::U16, false) => {
+                convert_rows(rows, |b| f32::from(u16::from_le_bytes(b)) * metres_per_unit)
+            }
+            (DepthEncoding::U16, true) => {
+                convert_rows(rows, |b| f32::from(u16::from_be_bytes(b)) * metres_per_unit)
+            }
+            (DepthEncoding::F32, false) => convert_rows(rows, |b| measured_or_zero(f32::from_le_bytes(b))),
+            (DepthEncoding::F32, true) => convert_rows(rows, |b| measured_or_zero(f32::from_be_bytes(b))),
+        }
+    }
+}
+
+/// Writes `metres(pixel)` for every `N`-byte pixel of each row into its output row.
+#[inline(always)]
+fn convert_rows<'a, const N: usize>(
+    rows: impl Iterator<Item = (&'a [u8], &'a mut [f32])>,
+    metres: impl Fn([u8; N]) -> f32,
+) {
+    for (row, out) in rows {
+        let (pixels, _) = row.as_chunks::<N>();
+        for (o, px) in out.iter_mut().zip(pixels) {
+            *o = metres(*px);
+        }
+    }
+}
+
+/// A depth in metres, or 0 (no measurement) for NaN, ±inf and values ≤ 0.
+#[inline(always)]
+fn measured_or_zero(metres: f32) -> f32 {
+    if metres.is_finite() && metres > 0.0 {
+        metres
+    } else {
+        0.0
+    }
 }
 
 impl FromStr for DepthEncoding {
@@ -182,6 +241,34 @@ impl CompressedDepthFormat {
     /// True when `format` claims to be compressed depth (whether or not it is supported).
     pub fn is_compressed_depth(format: &str) -> bool {
         format.contains(COMPRESSED_DEPTH)
+    }
+
+    /// Converts the decoded 16-bit values of a compressed depth image to metres (0 = no
+    /// measurement). [`DepthEncoding::U16`] values are sensor units, scaled by
+    /// `metres_per_unit` ([`DepthEncoding::metres_per_unit`]); [`DepthEncoding::F32`] is stored
+    /// as quantised inverse depth q: depth = a / (q − b), q = 0 invalid, with `[a, b]` =
+    /// `inverse_depth_params`, the two floats of the compressed image's header.
+    pub fn metres_from_values(
+        self,
+        values: &[u16],
+        inverse_depth_params: [f32; 2],
+        metres_per_unit: f32,
+        out: &mut [f32],
+    ) {
+        match self.depth {
+            DepthEncoding::U16 => {
+                for (o, v) in out.iter_mut().zip(values) {
+                    *o = f32::from(*v) * metres_per_unit;
+                }
+            }
+            DepthEncoding::F32 => {
+                let [a, b] = inverse_depth_params;
+                for (o, v) in out.iter_mut().zip(values) {
+                    let d = if *v == 0 { 0.0 } else { a / (f32::from(*v) - b) };
+                    *o = measured_or_zero(d);
+                }
+            }
+        }
     }
 }
 
@@ -351,6 +438,64 @@ mod tests {
             "8UC1; compressedDepth png"
         ));
         assert!(!CompressedDepthFormat::is_compressed_depth("png"));
+    }
+
+    #[test]
+    fn depth_rows_become_metres_in_either_byte_order() {
+        let convert = |e: DepthEncoding, rows: &[Vec<u8>], big_endian: bool| {
+            let mut out = vec![vec![-1.0f32; 2]; rows.len()];
+            let scale = e.metres_per_unit(1000.0);
+            e.metres_from_rows(
+                rows.iter()
+                    .map(Vec::as_slice)
+                    .zip(out.iter_mut().map(Vec::as_mut_slice)),
+                big_endian,
+                scale,
+            );
+            out
+        };
+        let u16_rows = |f: fn(u16) -> [u8; 2]| vec![[f(1500), f(0)].concat(), [f(65535), f(1)].concat()];
+        // The same f32 product as dataset depth (`image_buf::depth_m_from_u16_into`).
+        let m = |units: u16| f32::from(units) * (1.0 / 1000.0f32);
+        let expected = vec![vec![m(1500), 0.0], vec![m(65535), m(1)]];
+        assert_eq!(
+            convert(DepthEncoding::U16, &u16_rows(u16::to_le_bytes), false),
+            expected
+        );
+        assert_eq!(
+            convert(DepthEncoding::U16, &u16_rows(u16::to_be_bytes), true),
+            expected
+        );
+        let f32_rows = |f: fn(f32) -> [u8; 4]| {
+            vec![
+                [f(1.25), f(f32::NAN)].concat(),
+                [f(-2.0), f(f32::INFINITY)].concat(),
+            ]
+        };
+        let expected = vec![vec![1.25, 0.0], vec![0.0, 0.0]];
+        assert_eq!(
+            convert(DepthEncoding::F32, &f32_rows(f32::to_le_bytes), false),
+            expected
+        );
+        assert_eq!(
+            convert(DepthEncoding::F32, &f32_rows(f32::to_be_bytes), true),
+            expected
+        );
+        assert_eq!(DepthEncoding::F32.metres_per_unit(1000.0), 1.0);
+    }
+
+    #[test]
+    fn compressed_depth_values_become_metres() {
+        let format = |depth| CompressedDepthFormat {
+            depth,
+            codec: DepthCodec::Png,
+        };
+        let mut out = [0.0f32; 3];
+        format(DepthEncoding::U16).metres_from_values(&[5000, 0, 1], [0.0; 2], 1.0 / 5000.0, &mut out);
+        assert_eq!(out, [1.0, 0.0, 1.0 / 5000.0]);
+        // Inverse depth a / (q − b); q = 0 and negative depths are no measurement.
+        format(DepthEncoding::F32).metres_from_values(&[0, 4, 1], [6.0, 2.0], 1.0, &mut out);
+        assert_eq!(out, [0.0, 3.0, 0.0]);
     }
 
     #[test]

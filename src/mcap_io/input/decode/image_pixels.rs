@@ -1,6 +1,8 @@
 //! Pixel conversion of a decoded image message into the pipeline's buffers: grey, RGB and
 //! depth in metres, for every raw encoding ([`ColorEncoding`], [`DepthEncoding`]), PNG/JPEG
-//! and the compressed-depth formats. A new encoding's conversion goes here.
+//! and the compressed-depth formats. A new colour encoding's conversion goes here; depth
+//! values become metres in [`DepthEncoding`] and [`CompressedDepthFormat`] themselves, so a new
+//! depth encoding does not touch this file.
 
 use super::*;
 
@@ -264,9 +266,6 @@ pub fn depth_from_image_into(
     units_per_meter: f64,
     depth_m: &mut DepthMeters,
 ) -> Result<()> {
-    // The same scaling as `image_buf::depth_m_from_u16_into`, so decoded MCAP depth equals
-    // depth read from dataset files bit for bit.
-    let scale = 1.0 / units_per_meter as f32;
     match &msg.payload {
         ImagePayload::Raw {
             width,
@@ -283,37 +282,19 @@ pub fn depth_from_image_into(
             let size = raw_rows(topic, *width, *height, *step, bpp, data.len())?;
             resize_for(depth_m, size);
             let step = *step as usize;
-            for y in 0..size.height {
-                let row = &data[y * step..y * step + size.width * bpp];
-                let out = depth_m.row_mut(y);
-                if depth_encoding == DepthEncoding::U16 {
-                    for (o, b) in out.iter_mut().zip(row.chunks_exact(2)) {
-                        let raw = if *big_endian {
-                            u16::from_be_bytes([b[0], b[1]])
-                        } else {
-                            u16::from_le_bytes([b[0], b[1]])
-                        };
-                        *o = f32::from(raw) * scale;
-                    }
-                } else {
-                    for (o, b) in out.iter_mut().zip(row.chunks_exact(4)) {
-                        let bytes = [b[0], b[1], b[2], b[3]];
-                        let v = if *big_endian {
-                            f32::from_be_bytes(bytes)
-                        } else {
-                            f32::from_le_bytes(bytes)
-                        };
-                        *o = if v.is_finite() && v > 0.0 { v } else { 0.0 };
-                    }
-                }
-            }
+            let row_bytes = size.width * bpp;
+            let rows = (0..size.height).map(|y| &data[y * step..y * step + row_bytes]);
+            depth_encoding.metres_from_rows(
+                rows.zip(depth_m.as_mut_slice().chunks_exact_mut(size.width)),
+                *big_endian,
+                depth_encoding.metres_per_unit(units_per_meter),
+            );
             Ok(())
         }
         ImagePayload::Compressed { format, data } => {
             let compressed: CompressedDepthFormat = format
                 .parse()
                 .map_err(|_| unsupported(topic, ImageKind::Depth, format, SUPPORTED_DEPTH_ENCODINGS))?;
-            let raw = compressed.depth == DepthEncoding::U16;
             let Some((header, payload)) = data.split_at_checked(COMPRESSED_DEPTH_HEADER_BYTES) else {
                 return Err(compressed_error(
                     topic,
@@ -332,23 +313,17 @@ pub fn depth_from_image_into(
                 (size, decoded.into_raw())
             };
             resize_for(depth_m, size);
-            if raw {
-                for (o, v) in depth_m.as_mut_slice().iter_mut().zip(&values) {
-                    *o = f32::from(*v) * scale;
-                }
-            } else {
-                // 32FC1 is stored as quantised inverse depth q: depth = a / (q − b), q = 0
-                // invalid, with a and b the two floats after the format enum of the header.
-                let param = |i: usize| {
-                    let at = 4 + 4 * i;
-                    f32::from_le_bytes([header[at], header[at + 1], header[at + 2], header[at + 3]])
-                };
-                let (a, b) = (param(0), param(1));
-                for (o, v) in depth_m.as_mut_slice().iter_mut().zip(&values) {
-                    let d = if *v == 0 { 0.0 } else { a / (f32::from(*v) - b) };
-                    *o = if d.is_finite() && d > 0.0 { d } else { 0.0 };
-                }
-            }
+            // The header is the format enum, then the two inverse-depth parameters.
+            let param = |i: usize| {
+                let at = 4 + 4 * i;
+                f32::from_le_bytes([header[at], header[at + 1], header[at + 2], header[at + 3]])
+            };
+            compressed.metres_from_values(
+                &values,
+                [param(0), param(1)],
+                compressed.depth.metres_per_unit(units_per_meter),
+                depth_m.as_mut_slice(),
+            );
             Ok(())
         }
     }
