@@ -18,7 +18,8 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::Isometry3;
-use occmask::dvo::{residuals, solver, DvoConfig, DvoEstimator, DvoTracker};
+use occmask::dvo::bench_api as kernels;
+use occmask::dvo::{DvoConfig, DvoEstimator, DvoTracker};
 use occmask::geometry::camera::presets;
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
 use occmask::pyramid::ImagePyramid;
@@ -65,7 +66,7 @@ fn bench(c: &mut Criterion) {
     let pose = Isometry3::identity();
     for level in config.finest_level..config.levels {
         let lv = current.level(level).unwrap();
-        let target = residuals::TargetView {
+        let target = kernels::TargetView {
             samples: &lv.samples,
             size: lv.size(),
             intrinsics: lv.intrinsics,
@@ -74,15 +75,14 @@ fn bench(c: &mut Criterion) {
         let points = estimator.reference_points(level);
         group.bench_function(format!("lm_iteration_level{level}_{}pts", points.len()), |b| {
             b.iter(|| {
-                let ne =
-                    residuals::accumulate_normal_equations(points, lv.size().width, &target, &pose, &cost);
-                black_box(solver::damped_step(&ne, 0.1))
+                let ne = kernels::accumulate_normal_equations(points, lv.size().width, &target, &pose, &cost);
+                black_box(kernels::damped_step(&ne, 0.1))
             })
         });
         if level == config.finest_level {
             group.bench_function(format!("normal_equations_scalar_reference_level{level}"), |b| {
                 b.iter(|| {
-                    black_box(residuals::accumulate_normal_equations_scalar(
+                    black_box(kernels::accumulate_normal_equations_scalar(
                         points, &target, &pose, &cost,
                     ))
                 })

@@ -17,8 +17,8 @@ mod data;
 use std::time::Instant;
 
 use nalgebra::Isometry3;
-use occmask::dvo::solver::{self, LmSchedule};
-use occmask::dvo::{residuals, DvoConfig, DvoEstimator};
+use occmask::dvo::bench_api::{self as kernels, LmSchedule};
+use occmask::dvo::{DvoConfig, DvoEstimator, LevelStop};
 use occmask::geometry::camera::presets;
 use occmask::geometry::PinholeIntrinsics;
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
@@ -75,7 +75,7 @@ fn per_level(
             let mut pose = Isometry3::identity();
             for l in (cfg.finest_level..cfg.levels).rev() {
                 let lv = current.level(l).unwrap();
-                let target = residuals::TargetView {
+                let target = kernels::TargetView {
                     samples: &lv.samples,
                     size: lv.size(),
                     intrinsics: lv.intrinsics,
@@ -92,7 +92,7 @@ fn per_level(
                 let points = estimator.reference_points(l);
                 let t = Instant::now();
                 let mut level_pose = pose;
-                let res = solver::optimize_level(
+                let res = kernels::optimize_level(
                     points,
                     lv.size().width,
                     &target,
@@ -108,9 +108,9 @@ fn per_level(
                 if let Ok(res) = res {
                     tot.iterations += res.iterations as u64;
                     match res.stop {
-                        solver::LevelStop::MaxIterations => tot.max_iterations_hit += 1,
-                        solver::LevelStop::LambdaOverflow => tot.lambda_overflow += 1,
-                        solver::LevelStop::SmallStep => {}
+                        LevelStop::MaxIterations => tot.max_iterations_hit += 1,
+                        LevelStop::LambdaOverflow => tot.lambda_overflow += 1,
+                        LevelStop::SmallStep => {}
                     }
                     pose = level_pose;
                 }
@@ -118,7 +118,7 @@ fn per_level(
                 let points = estimator.reference_points(l);
                 for _ in 0..3 {
                     let t = Instant::now();
-                    std::hint::black_box(residuals::accumulate_normal_equations(
+                    std::hint::black_box(kernels::accumulate_normal_equations(
                         points,
                         lv.size().width,
                         &target,

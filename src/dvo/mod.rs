@@ -4,9 +4,9 @@
 //!
 //! - Cost: Σ ρ_{k_I}(r_I) + γ·Σ ρ_{k_Z}(r_Z) over reference pixels with valid depth that are not
 //!   ignored; r_I photometric, r_Z = Z_cur(w) − z′ against the transformed depth; ρ bi-square
-//!   (paper Eq. 11–13). See [`residuals`] for the residuals and Jacobians.
+//!   (paper Eq. 11–13). See `residuals.rs` for the residuals and Jacobians.
 //! - Solver: IRLS inside a true Levenberg–Marquardt with accept/revert on the robust cost,
-//!   coarse to fine over an image pyramid ([`crate::pyramid`]), see [`solver`].
+//!   coarse to fine over an image pyramid ([`crate::pyramid`]), see `solver.rs`.
 //! - Motion convention (crate-wide, [`crate::geometry`]): the estimate is
 //!   `current_from_reference`, mapping reference-camera points into the current camera;
 //!   chain it into poses with [`crate::trajectory::chain`].
@@ -34,14 +34,29 @@
 //! # Ok::<(), occmask::Error>(())
 //! ```
 
-// Kernels are crate-private; `residuals` and `solver` stay public for the DVO benchmark and
-// the profiling example, which time them on their own.
+// Kernels are crate-private. The DVO benchmark and the profiling example time the normal
+// equations and the LM solve on their own: they reach them through `bench_api`, which is not
+// part of the documented API.
 pub(crate) mod completion;
 mod config;
 pub(crate) mod mask;
-pub mod residuals;
-pub mod solver;
+pub(crate) mod residuals;
+pub(crate) mod solver;
 pub(crate) mod weights;
+
+pub use residuals::{CostParams, ReferencePoint};
+pub use solver::LevelStop;
+
+/// The DVO kernels for benchmarks and profiling tools (`benches/dvo.rs`,
+/// `examples/pipeline_profile.rs`), which time one level's normal equations and LM solve on
+/// their own. Not a stable API: it follows the kernels' signatures.
+#[doc(hidden)]
+pub mod bench_api {
+    pub use super::residuals::{
+        accumulate_normal_equations, accumulate_normal_equations_scalar, NormalEquations, TargetView,
+    };
+    pub use super::solver::{damped_step, optimize_level, LevelError, LevelResult, LmSchedule, MotionPrior};
+}
 
 pub use completion::{IgnoreCompletion, IgnoreCompletionConfig};
 pub use config::{
@@ -59,8 +74,8 @@ use crate::geometry::se3::is_finite_pose;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use crate::pyramid::{level_size, ImagePyramid, TargetSample};
-use residuals::{CostParams, ReferencePoint, TargetView};
-use solver::{LevelError, LevelStop, LmSchedule};
+use residuals::TargetView;
+use solver::{LevelError, LmSchedule};
 
 /// Why an estimate failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -243,7 +243,7 @@ pub fn linearize_point(
 }
 
 /// Scalar reference of the normal-equation accumulation: one thread, f64, nalgebra, built on
-/// [`linearize_point`]. Slow; kept to test [`accumulate_normal_equations`] against.
+/// `linearize_point`. Slow; kept to test [`accumulate_normal_equations`] against.
 pub fn accumulate_normal_equations_scalar(
     points: &[ReferencePoint],
     target: &TargetView<'_>,
@@ -297,7 +297,7 @@ pub fn accumulate_normal_equations_scalar(
 
 /// The fast kernel: [`accumulate_normal_equations_scalar`] in f32 per point with f64 totals,
 /// row-parallel with rayon (fold per task, then reduce). `row_width` is the width of the level
-/// the points came from (it only sets the task size, see [`ROWS_PER_TASK`]).
+/// the points came from (it only sets the task size, see `ROWS_PER_TASK`).
 pub fn accumulate_normal_equations(
     points: &[ReferencePoint],
     row_width: usize,
