@@ -625,7 +625,11 @@ pub enum DecodeProblem {
     },
     /// A raw image's data length disagrees with its size, step and encoding (`found < needed`:
     /// truncated).
-    #[error("{}", describe_image_length(*size, *step, *bytes_per_pixel, *needed, *full, *found))]
+    #[error(
+        "image {size} with step {step} and {bytes_per_pixel} bytes per pixel needs {needed}{} bytes, \
+         found {found} (width, height, step or encoding disagree with the data)",
+        if needed == full { String::new() } else { format!(" or {full}") }
+    )]
     ImageLength {
         /// The size declared.
         size: ImageSize,
@@ -656,26 +660,6 @@ pub enum DecodeProblem {
         /// What was expected and found.
         mismatch: Mismatch,
     },
-}
-
-/// The message of [`DecodeProblem::ImageLength`].
-fn describe_image_length(
-    size: ImageSize,
-    step: usize,
-    bytes_per_pixel: usize,
-    needed: usize,
-    full: usize,
-    found: usize,
-) -> String {
-    let expected = if needed == full {
-        format!("{needed}")
-    } else {
-        format!("{needed} or {full}")
-    };
-    format!(
-        "image {size} with step {step} and {bytes_per_pixel} bytes per pixel needs {expected} bytes, found \
-         {found} (width, height, step or encoding disagree with the data)"
-    )
 }
 
 /// Why an MCAP container is not usable ([`Error::BadMcap`]).
