@@ -198,10 +198,14 @@ pub fn process_file<W: Write + Seek + Send>(
     }
     writer.write_metadata(METADATA_PROCESS, metadata)?;
 
-    let color_ct =
-        (topics.color.channel_type).ok_or_else(|| unsupported_schema(&topics.color, IMAGE_SCHEMA))?;
-    let depth_ct =
-        (topics.depth.channel_type).ok_or_else(|| unsupported_schema(&topics.depth, IMAGE_SCHEMA))?;
+    let color_ct = topics
+        .color
+        .channel_type
+        .ok_or_else(|| unsupported_schema(&topics.color, IMAGE_SCHEMA))?;
+    let depth_ct = topics
+        .depth
+        .channel_type
+        .ok_or_else(|| unsupported_schema(&topics.depth, IMAGE_SCHEMA))?;
     let copy = config.annotate.copy_input;
     let read_topics: Option<Vec<String>> = if copy {
         None
