@@ -1,10 +1,13 @@
 //! Occlusion-accumulation detector alone (one `update_with_gray` per frame, true camera motion)
 //! on the synthetic dominant-object sequence at 640×480 and 320×240, with the default config
-//! (appearance-gated object completion on). `occlusion_update_paper` runs the same frames at
-//! 640×480 with the completion off (the paper's detector): the difference is that stage's cost.
+//! (slow-change evidence on). At 640×480 `occlusion_update_paper` runs the same frames with the
+//! paper's accumulation alone (no slow-change evidence), `occlusion_update_growth` with
+//! appearance-gated object completion added: the differences are those stages' costs.
 //! `occlusion_update_starting_object` runs the still-then-moving frames where the completion
-//! grows the most (frames 31–46: a box starting to move). Target: ≤ 3 ms per 640×480
-//! frame. Run: `cargo bench --bench occlusion` (add `-- --quick` for a short run).
+//! grows the most (frames 31–46: a box starting to move); `occlusion_update_head_on` the
+//! head-on approach (frames 40–69), where the slow-change evidence marks the box. Target:
+//! ≤ 3 ms per 640×480 frame. Run: `cargo bench --bench occlusion` (add `-- --quick` for a short
+//! run).
 
 // A benchmark's setup failing is a bug in the benchmark: panicking is the right report.
 #![allow(clippy::unwrap_used)]
@@ -14,7 +17,7 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::Isometry3;
 use occmask::image_buf::{DepthMeters, GrayF32, ImageSize};
-use occmask::occlusion::{OcclusionConfig, OcclusionDetector};
+use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
 /// Frames cycled through (a window where the object covers much of the view).
@@ -79,9 +82,15 @@ fn bench(
 }
 
 fn detector(c: &mut Criterion) {
+    let default = OcclusionConfig::default();
     let paper = OcclusionConfig {
+        slow_evidence: None,
         appearance_growth: None,
-        ..OcclusionConfig::default()
+        ..default
+    };
+    let growth = OcclusionConfig {
+        appearance_growth: Some(AppearanceGrowthConfig::default()),
+        ..default
     };
     for size in [ImageSize::new(640, 480), ImageSize::new(320, 240)] {
         let (config, frames) = frames(Scenario::DominantObject, size, FRAMES);
@@ -91,7 +100,7 @@ fn detector(c: &mut Criterion) {
             format!("{size}"),
             &config,
             &frames,
-            OcclusionConfig::default(),
+            default,
         );
         if size.width == 640 {
             bench(
@@ -102,17 +111,36 @@ fn detector(c: &mut Criterion) {
                 &frames,
                 paper,
             );
+            bench(
+                c,
+                "occlusion_update_growth",
+                format!("{size}"),
+                &config,
+                &frames,
+                growth,
+            );
         }
     }
     let size = ImageSize::new(640, 480);
-    let (config, frames) = frames(Scenario::StillThenMoving, size, STARTING_FRAMES);
-    for (name, detector_config) in [("growth", OcclusionConfig::default()), ("paper", paper)] {
+    let (config, frames_starting) = frames(Scenario::StillThenMoving, size, STARTING_FRAMES);
+    for (name, detector_config) in [("growth", growth), ("default", default)] {
         bench(
             c,
             "occlusion_update_starting_object",
             format!("{size} {name}"),
             &config,
-            &frames,
+            &frames_starting,
+            detector_config,
+        );
+    }
+    let (config, frames_head_on) = frames(Scenario::HeadOnApproach, size, FRAMES);
+    for (name, detector_config) in [("paper", paper), ("default", default)] {
+        bench(
+            c,
+            "occlusion_update_head_on",
+            format!("{size} {name}"),
+            &config,
+            &frames_head_on,
             detector_config,
         );
     }

@@ -13,7 +13,8 @@
 //! default configuration as `occmask process --print-config` prints it (a partial nested
 //! object keeps the other fields of that default). Defaults: 640×480, seed 1, every scenario,
 //! every mode. `tools/detector_configs/` holds the overrides the scenario tables were measured
-//! with (appearance-gated completion on; sub-threshold retention 0.9; both).
+//! with (appearance-gated completion on; sub-threshold retention 0.9; both; without the
+//! slow-change evidence of docs/method.md D16, the paper's accumulation alone).
 //!
 //! Per run it prints (and with `--json` writes, with every frame's scores and every onset run,
 //! as `occmask::scenario_eval::ScenarioScore`):

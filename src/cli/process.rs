@@ -146,6 +146,9 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
     } else if args.no_appearance_growth {
         processor.occlusion.appearance_growth = None;
     }
+    if args.no_slow_evidence {
+        processor.occlusion.slow_evidence = None;
+    }
     if args.causal {
         processor.mode = ProcessingMode::Causal;
     }

@@ -6,7 +6,7 @@
 use super::runs::{Run, RunLabelling};
 use super::transport::PixelBounds;
 use super::{Adjacency, OcclusionConfig};
-use crate::image_buf::{DepthMeters, Image, ImageSize, Mask};
+use crate::image_buf::{DepthMeters, Image, ImageSize, Mask, MASK_SET};
 
 /// Label of a set pixel not yet assigned to a component (the reference flood fill's input).
 #[cfg(test)]
@@ -491,6 +491,52 @@ impl Components {
             }
         }
         (filled, filled_bounds)
+    }
+
+    /// Slow-change evidence (`OcclusionConfig::slow_evidence`): opens `evidence` (0 / 1, whole
+    /// image, empty outside `bounds`) with a (2r+1)² square inside `bounds`, labels it, and sets
+    /// every component of at least `min_pixels` pixels in `mask`. Returns the mask pixels added.
+    pub(super) fn add_evidence_components(
+        &mut self,
+        evidence: &[u8],
+        bounds: PixelBounds,
+        radius: usize,
+        min_pixels: usize,
+        mask: &mut Mask,
+    ) -> usize {
+        let width = self.width;
+        let (box_width, box_height) = box_dims(bounds);
+        let box_area = box_width * box_height;
+        let (opened, scratch) = (&mut self.morph_a[..box_area], &mut self.morph_b[..box_area]);
+        let set_box = &evidence[bounds.y0 * width + bounds.x0..];
+        if radius > 0 {
+            square_filter(
+                set_box, width, scratch, opened, box_width, box_height, radius, true,
+            );
+            square_rows(opened, box_width, scratch, box_width, box_height, radius, false);
+            square_columns(scratch, opened, box_width, box_height, radius, false);
+        } else {
+            for (y, row) in opened.chunks_exact_mut(box_width).enumerate() {
+                row.copy_from_slice(&set_box[y * width..y * width + box_width]);
+            }
+        }
+        let count = self
+            .runs
+            .label(opened, box_width, box_width, box_height, (bounds.x0, bounds.y0));
+        let mut added = 0;
+        let m = mask.as_mut_slice();
+        for k in 0..count {
+            if self.runs.pixels(k) < min_pixels {
+                continue;
+            }
+            for run in self.runs.runs(k) {
+                for v in &mut m[run.pixels(width)] {
+                    added += usize::from(*v == 0);
+                    *v = MASK_SET;
+                }
+            }
+        }
+        added
     }
 
     /// Step 12: erases (from A, O and P) every 8-connected component of `predicted` that has no

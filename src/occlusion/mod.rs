@@ -37,6 +37,7 @@ mod components;
 pub mod consistency;
 mod growth;
 pub(crate) mod runs;
+mod slow;
 pub mod transport;
 
 use std::time::Instant;
@@ -53,6 +54,8 @@ use rayon::prelude::*;
 use components::Components;
 pub use growth::AppearanceGrowthConfig;
 use growth::{AppearanceGrowth, GrowthFrame};
+pub use slow::SlowEvidenceConfig;
+use slow::{SlowFrame, SlowScratch};
 use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, TransportScratch};
 
 /// Functional form of the truncation thresholds τ_α and τ_β (paper Eq. 4–6; docs/method.md).
@@ -149,6 +152,13 @@ pub struct OcclusionConfig {
     /// the default: on real people the changing shadows at their feet let it grow over the
     /// floor, which then misleads the closed loop's odometry; docs/method.md has the figures).
     pub appearance_growth: Option<AppearanceGrowthConfig>,
+    /// Slow-change evidence (not in the paper, see [`SlowEvidenceConfig`]): a leaky sum of ΔZ
+    /// beside A, cleared of the camera motion's error, whose large components join the mask: an
+    /// object approaching head-on or covering a surface just behind it, whose ΔZ per frame stays
+    /// below τ_α. On by default (measured on the synthetic failure classes and on real people,
+    /// docs/method.md D16), for images of at least 240 px on the short side; `None` = off (the
+    /// paper's accumulation alone).
+    pub slow_evidence: Option<SlowEvidenceConfig>,
 }
 
 impl Default for OcclusionConfig {
@@ -169,12 +179,18 @@ impl Default for OcclusionConfig {
             prune_exit_margin_px: EXIT_MARGIN_PX,
             motion_check_margin: Some(MOTION_CHECK_MARGIN),
             appearance_growth: None,
+            slow_evidence: Some(SlowEvidenceConfig::default()),
         }
     }
 }
 
 /// Pixels of a VGA image, the resolution the object threshold is given for.
 const VGA_PIXELS: usize = 640 * 480;
+
+/// A pixel count given at 640 × 480 scaled to the area of `size` (at least 1).
+fn scaled_pixels(pixels_vga: usize, size: ImageSize) -> usize {
+    ((pixels_vga as f64 * size.area() as f64 / VGA_PIXELS as f64).round() as usize).max(1)
+}
 
 /// Default `motion_check_margin`. Measured (docs/accuracy.md): with correct motions
 /// the motion's consistency minus identity's is ≥ −0.02 on every synthetic frame and ≥ −0.07 on
@@ -230,12 +246,15 @@ impl OcclusionConfig {
         if let Some(growth) = &self.appearance_growth {
             growth.validate()?;
         }
+        if let Some(slow) = &self.slow_evidence {
+            slow.validate()?;
+        }
         Ok(())
     }
 
     /// Minimum object component size for an image of `size` (500 px × area / VGA area, ≥ 1).
     pub fn min_object_pixels(&self, size: ImageSize) -> usize {
-        ((self.min_object_pixels_vga as f64 * size.area() as f64 / VGA_PIXELS as f64).round() as usize).max(1)
+        scaled_pixels(self.min_object_pixels_vga, size)
     }
 
     /// τ for depth `z_m` with coefficient `coefficient` in this config's form.
@@ -283,6 +302,13 @@ pub struct OcclusionStats {
     pub grown_pixels: usize,
     /// Time of appearance-gated object completion, µs.
     pub growth_us: u64,
+    /// Pixels the slow-change evidence added to the mask.
+    pub slow_pixels: usize,
+    /// The camera-motion error removed from the slow-change evidence (v in m, ω in rad), when
+    /// one was fitted and applied.
+    pub slow_motion_correction: Option<[f64; 6]>,
+    /// Time of the slow-change evidence (fit, correction, labelling), µs.
+    pub slow_us: u64,
 }
 
 /// Per-sequence detector state (docs/method.md: Zc, A, P, B and scratch buffers).
@@ -316,6 +342,9 @@ pub struct OcclusionDetector {
     components: Components,
     /// Appearance-gated object completion state (previous gray image, growth buffers).
     growth: AppearanceGrowth,
+    /// Slow-change evidence state (None when it is off).
+    slow: Option<SlowState>,
+
     stats: OcclusionStats,
     /// Ray-factor tables of the motion check (per sampled column, per sampled row).
     motion_check_rays: (Vec<f64>, Vec<f64>),
@@ -324,7 +353,8 @@ pub struct OcclusionDetector {
 }
 
 impl OcclusionDetector {
-    /// A detector for `size` images with `intrinsics`.
+    /// A detector for `size` images with `intrinsics`. The slow-change evidence is left out on
+    /// images under 240 px on their short side (see [`OcclusionConfig::slow_evidence`]).
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] for a bad config, invalid intrinsics or an empty size.
@@ -348,6 +378,12 @@ impl OcclusionDetector {
                 expected: "a non-empty image with fewer than 2^32 pixels and sides below 2^23".into(),
             });
         }
+        let config = OcclusionConfig {
+            slow_evidence: config
+                .slow_evidence
+                .filter(|_| size.width.min(size.height) >= slow::MIN_SIDE_PX),
+            ..config
+        };
         let depth = || Image::filled(size, 0.0f32);
         Ok(Self {
             config,
@@ -368,6 +404,14 @@ impl OcclusionDetector {
             newly_discovered: Image::filled(size, 0),
             components: Components::new(size),
             growth: AppearanceGrowth::new(size),
+            slow: config.slow_evidence.map(|slow| SlowState {
+                w_m: depth(),
+                w_next_m: depth(),
+                evidence: vec![0; size.area()],
+                odometry_mask: Image::filled(size, 0),
+                min_pixels: scaled_pixels(slow.min_object_pixels_vga, size),
+                scratch: SlowScratch::new(size.area()),
+            }),
             stats: OcclusionStats::default(),
             motion_check_rays: (
                 Vec::with_capacity(size.width.div_ceil(MOTION_CHECK_STRIDE)),
@@ -400,6 +444,10 @@ impl OcclusionDetector {
         self.mask.fill(0);
         self.compensated_m.fill(0.0);
         self.growth.invalidate();
+        if let Some(slow) = &mut self.slow {
+            slow.w_m.fill(0.0);
+            slow.odometry_mask.fill(0);
+        }
     }
 
     /// The accumulation map A (m): 0 or above τ_α after every update.
@@ -445,6 +493,20 @@ impl OcclusionDetector {
     /// The latest moving-object mask.
     pub fn mask(&self) -> &Mask {
         &self.mask
+    }
+
+    /// The latest mask without the slow-change evidence ([`OcclusionConfig::slow_evidence`]):
+    /// what a closed loop's odometry should ignore. The slow-change evidence is sensitive to the
+    /// odometry's own errors (it sums sub-threshold depth changes), so feeding it back lets the
+    /// odometry's errors steer the mask that steers the odometry (docs/method.md, D16). Without
+    /// the slow-change evidence it is [`Self::mask`].
+    pub fn odometry_mask(&self) -> &Mask {
+        self.slow.as_ref().map_or(&self.mask, |slow| &slow.odometry_mask)
+    }
+
+    /// The slow-change evidence W of the latest frame (m), when it is on.
+    pub fn slow_evidence_m(&self) -> Option<&DepthMeters> {
+        self.slow.as_ref().map(|slow| &slow.w_m)
     }
 
     /// Statistics of the latest update.
@@ -516,6 +578,10 @@ impl OcclusionDetector {
             delta_z_m.fill(0.0);
         }
         self.newly_discovered.fill(0);
+        if let Some(slow) = &mut self.slow {
+            slow.w_m.fill(0.0);
+            slow.odometry_mask.fill(0);
+        }
         self.frames = 1;
         self.growth.remember(gray);
     }
@@ -529,6 +595,10 @@ impl OcclusionDetector {
     ) {
         let started = Instant::now();
         let previous_from_current = current_from_previous.inverse();
+        let (slow_previous, slow_next) = match (&mut self.slow, self.config.slow_evidence) {
+            (Some(state), Some(config)) => (Some((&state.w_m, config.retention)), Some(&mut state.w_next_m)),
+            _ => (None, None),
+        };
         let inputs = TransportInputs {
             rays: &self.rays,
             intrinsics: &self.intrinsics,
@@ -538,6 +608,7 @@ impl OcclusionDetector {
             compensated_previous_m: &self.compensated_m,
             accumulation_previous_m: &self.accumulation_m,
             predicted_previous: &self.predicted,
+            slow_previous,
         };
         let outputs = TransportOutputs {
             compensated_m: &mut self.compensated_next_m,
@@ -546,6 +617,7 @@ impl OcclusionDetector {
             delta_z_m: self.delta_z_m.as_mut(),
             newly_discovered: &mut self.newly_discovered,
             object_set: self.components.object_set_mut(),
+            slow_m: slow_next,
         };
         let counts = if self.reference_transport {
             transport::transport_scalar(&inputs, outputs)
@@ -556,6 +628,9 @@ impl OcclusionDetector {
         // depth stays in `compensated_next_m` for the motion check.
         std::mem::swap(&mut self.compensated_m, &mut self.compensated_next_m);
         std::mem::swap(&mut self.accumulation_m, &mut self.accumulation_next_m);
+        if let Some(slow) = &mut self.slow {
+            std::mem::swap(&mut slow.w_m, &mut slow.w_next_m);
+        }
         self.stats.transport_us = started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
@@ -600,6 +675,31 @@ impl OcclusionDetector {
         self.stats.small_components_erased = label_stats.small_components_erased;
         self.stats.predicted_pixels = label_stats.predicted_pixels;
         self.stats.label_predict_us = started.elapsed().as_micros() as u64;
+
+        // Slow-change evidence, while `self.mask` still holds the previous frame's mask (the
+        // motion-error fit leaves it out).
+        let slow_started = Instant::now();
+        let slow_bounds = match (&mut self.slow, &self.config.slow_evidence) {
+            (Some(state), Some(config)) => {
+                let counts = slow::update(
+                    &SlowFrame {
+                        config,
+                        intrinsics: &self.intrinsics,
+                        rays: &self.rays,
+                        previous_from_current: &previous_from_current,
+                        depth_m: &self.compensated_m,
+                        w_m: &state.w_m,
+                        previous_mask: &self.mask,
+                    },
+                    &mut state.scratch,
+                    &mut state.evidence,
+                );
+                self.stats.slow_motion_correction = counts.correction;
+                counts.bounds
+            }
+            _ => None,
+        };
+        let mut slow_us = slow_started.elapsed().as_micros() as u64;
 
         let started = Instant::now();
         // Step 11, O = {A > τ_α}, fused with step 12's P = (P̂ ∨ Ñ) ∧ O (binary, the
@@ -660,7 +760,46 @@ impl OcclusionDetector {
             self.stats.growth_us = started.elapsed().as_micros() as u64;
         }
         self.growth.remember(gray);
+
+        // The slow-change evidence joins the published mask; DVO's ignore mask
+        // (`odometry_mask`) stays the mask without it.
+        if let (Some(state), Some(config)) = (&mut self.slow, &self.config.slow_evidence) {
+            let started = Instant::now();
+            state
+                .odometry_mask
+                .as_mut_slice()
+                .copy_from_slice(self.mask.as_slice());
+            if let Some(bounds) = slow_bounds {
+                let added = self.components.add_evidence_components(
+                    &state.evidence,
+                    bounds,
+                    config.opening_radius_px,
+                    state.min_pixels,
+                    &mut self.mask,
+                );
+                self.stats.slow_pixels = added;
+                self.stats.mask_pixels += added;
+            }
+            slow_us += started.elapsed().as_micros() as u64;
+        }
+        self.stats.slow_us = slow_us;
     }
+}
+
+/// Slow-change evidence buffers ([`OcclusionConfig::slow_evidence`]).
+#[derive(Debug, Clone)]
+struct SlowState {
+    /// W of the latest frame (m).
+    w_m: DepthMeters,
+    /// The transport's output (swapped in).
+    w_next_m: DepthMeters,
+    /// {W > α·Z} of the latest frame (0 / 1).
+    evidence: Vec<u8>,
+    /// The latest mask without the slow-change evidence ([`OcclusionDetector::odometry_mask`]).
+    odometry_mask: Mask,
+    /// The evidence's component threshold at this image size.
+    min_pixels: usize,
+    scratch: SlowScratch,
 }
 
 /// The motion check's verdict ([`OcclusionConfig::motion_check_margin`]).

@@ -82,6 +82,7 @@ macro_rules! simd_kernel {
         }
     };
 }
+pub(super) use simd_kernel;
 
 /// Inclusive bounding box of a pixel set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -147,6 +148,12 @@ pub struct TransportScratch {
     /// One row per parallel task holding z′, then ΔZ, when ΔZ is not recorded
     /// ([`TransportOutputs::delta_z_m`] is None).
     staging_rows: Vec<f32>,
+    /// One unused value per parallel task: the slow-evidence rows when W is not kept.
+    no_slow_rows: Vec<f32>,
+    /// The geometric warp's sources and z′ of one row per parallel task, for W when the
+    /// detector's own warp is the release's ([`super::WarpDepth::PreviousCompensated`]).
+    slow_source_rows: Vec<u32>,
+    slow_qz_rows: Vec<f32>,
 }
 
 impl TransportScratch {
@@ -156,6 +163,9 @@ impl TransportScratch {
             column_terms: [vec![0.0; width], vec![0.0; width], vec![0.0; width]],
             source_rows: vec![NO_SOURCE; height.div_ceil(ROWS_PER_TASK) * width],
             staging_rows: vec![0.0; height.div_ceil(ROWS_PER_TASK) * width],
+            no_slow_rows: vec![0.0; height.div_ceil(ROWS_PER_TASK)],
+            slow_source_rows: vec![NO_SOURCE; height.div_ceil(ROWS_PER_TASK) * width],
+            slow_qz_rows: vec![0.0; height.div_ceil(ROWS_PER_TASK) * width],
         }
     }
 }
@@ -178,6 +188,9 @@ pub struct TransportInputs<'a> {
     pub accumulation_previous_m: &'a DepthMeters,
     /// Predicted-area map of the previous frame (0 / 1).
     pub predicted_previous: &'a Image<u8>,
+    /// Slow-change evidence W of the previous frame (m) and its retention, when it is kept
+    /// ([`super::SlowEvidenceConfig`]).
+    pub slow_previous: Option<(&'a DepthMeters, f32)>,
 }
 
 /// Outputs of the transport step (all the detector's size).
@@ -194,6 +207,9 @@ pub struct TransportOutputs<'a> {
     pub newly_discovered: &'a mut Image<u8>,
     /// 1 where A > τ_α (the object set O₀), else 0; one entry per pixel.
     pub object_set: &'a mut [u8],
+    /// W = retention · Ŵ + ΔZ where the warp is valid and the background did not reappear
+    /// (ΔZ > −τ_β), else 0 (m), when [`TransportInputs::slow_previous`] is given.
+    pub slow_m: Option<&'a mut DepthMeters>,
 }
 
 /// Pixel counts of one transport.
@@ -289,6 +305,25 @@ pub fn transport_with(
         Some(delta_z_m) => (delta_z_m.as_mut_slice(), chunk),
         None => (&mut scratch.staging_rows[..], width),
     };
+    // W's rows (or one unused value per task), and Ŵ's source with the retention.
+    let slow_previous = inputs
+        .slow_previous
+        .filter(|_| outputs.slow_m.is_some())
+        .map(|(w, retention)| (&w.as_slice()[..area], retention));
+    let (slow_buffer, slow_chunk) = match outputs.slow_m {
+        Some(slow_m) if slow_previous.is_some() => (slow_m.as_mut_slice(), chunk),
+        _ => (&mut scratch.no_slow_rows[..], 1),
+    };
+    // W always compares depths through the geometric warp (a static surface's ΔZ then sums to
+    // zero along the warp chain); when A uses the release's warp, W gets a warp of its own.
+    let slow_warp = (slow_previous.is_some() && !geometric).then_some(WarpParameters {
+        translation: warp.translation,
+        focal: warp.focal,
+        centre: warp.centre,
+        max: warp.max,
+        width: warp.width,
+        geometric: true,
+    });
     outputs
         .compensated_m
         .as_mut_slice()
@@ -299,9 +334,24 @@ pub fn transport_with(
         .zip(outputs.newly_discovered.as_mut_slice().par_chunks_mut(chunk))
         .zip(outputs.object_set[..area].par_chunks_mut(chunk))
         .zip(scratch.source_rows.par_chunks_mut(width))
+        .zip(slow_buffer.par_chunks_mut(slow_chunk))
+        .zip(scratch.slow_source_rows.par_chunks_mut(width))
+        .zip(scratch.slow_qz_rows.par_chunks_mut(width))
         .enumerate()
         .map(
-            |(task, ((((((zc_rows, a_rows), p_rows), dz_rows), n_rows), set_rows), source_row))| {
+            |(
+                task,
+                (
+                    (
+                        (
+                            ((((((zc_rows, a_rows), p_rows), dz_rows), n_rows), set_rows), source_row),
+                            slow_rows,
+                        ),
+                        slow_source_row,
+                    ),
+                    slow_qz_row,
+                ),
+            )| {
                 let mut counts = TransportCounts::default();
                 let rows = zc_rows
                     .chunks_exact_mut(width)
@@ -321,6 +371,23 @@ pub fn transport_with(
                     // Rotated ray = column term + row term, row term = R[:,1]·ray_y + R[:,2].
                     let ray_y = inputs.rays.ray_y[y];
                     let row_term = [0, 1, 2].map(|axis| rotation[(axis, 1)] * ray_y + rotation[(axis, 2)]);
+                    if let Some(slow_warp) = &slow_warp {
+                        warp_row(
+                            simd,
+                            slow_warp,
+                            row_term,
+                            [terms_x, terms_y, terms_z],
+                            (measured_row, previous_row),
+                            slow_qz_row,
+                            slow_source_row,
+                        );
+                    }
+                    let slow = slow_previous.map(|(previous, retention)| SlowRow {
+                        previous,
+                        retention,
+                        row: &mut slow_rows[row * width..(row + 1) * width],
+                        own_warp: slow_warp.is_some().then_some((&*slow_source_row, &*slow_qz_row)),
+                    });
                     // Pass 1: the warp source of every pixel; the ΔZ row holds z′ until pass 2
                     // reads it.
                     warp_row(
@@ -347,6 +414,7 @@ pub fn transport_with(
                             newly_discovered: n_row,
                             object_set: set_row,
                         },
+                        slow,
                     );
                     counts.warped += row_counts.warped;
                     counts.newly_discovered += row_counts.newly_discovered;
@@ -477,6 +545,16 @@ struct FinishRow<'a> {
     object_set: &'a mut [u8],
 }
 
+/// Slow-change evidence of one row ([`finish_row`]): Ŵ's source image, the retention, and the
+/// row of W to write.
+struct SlowRow<'a> {
+    previous: &'a [f32],
+    retention: f32,
+    row: &'a mut [f32],
+    /// W's own (geometric) warp of the row: sources and z′; None = the row's warp is it.
+    own_warp: Option<(&'a [u32], &'a [f32])>,
+}
+
 /// Counts of one row.
 struct RowCounts {
     warped: usize,
@@ -501,6 +579,7 @@ fn finish_row(
     sources: &[u32],
     (previous_zc, previous_a, previous_p): (&[f32], &[f32], &[u8]),
     out: FinishRow<'_>,
+    mut slow: Option<SlowRow<'_>>,
 ) -> RowCounts {
     let n = measured_row.len();
     let last_pixel = previous_zc.len() - 1;
@@ -549,6 +628,19 @@ fn finish_row(
             dz_row,
         );
         let object_count = object_set_block(simd, finish, zc_row, a_row, set_row);
+        if let Some(slow) = slow.as_mut() {
+            slow_update(
+                simd,
+                finish,
+                sources,
+                measured,
+                previous_zc,
+                zc_row,
+                dz_row,
+                slow,
+                start..end,
+            );
+        }
         let newly_count = flags_block(
             simd,
             sources,
@@ -570,6 +662,54 @@ fn finish_row(
         start = end;
     }
     counts
+}
+
+/// W on the block `range` of a row (its sources, measured depth, Zc and ΔZ slices are the
+/// block's): through the row's own warp or, when W has one ([`SlowRow::own_warp`]), through that.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn slow_update(
+    simd: Simd,
+    finish: &FinishParameters,
+    sources: &[u32],
+    measured: &[f32],
+    previous_zc: &[f32],
+    zc_row: &[f32],
+    dz_row: &[f32],
+    slow: &mut SlowRow<'_>,
+    range: std::ops::Range<usize>,
+) {
+    let len = range.len();
+    let mut carried_w = [0.0f32; FINISH_BLOCK];
+    let mut own_delta = [0.0f32; FINISH_BLOCK];
+    let (slow_sources, slow_dz): (&[u32], &[f32]) = match slow.own_warp {
+        None => (sources, dz_row),
+        Some((own_sources, own_qz)) => {
+            let own_sources = &own_sources[range.clone()];
+            geometric_delta_block(
+                simd,
+                own_sources,
+                previous_zc,
+                measured,
+                &own_qz[range.clone()],
+                &mut own_delta[..len],
+            );
+            (own_sources, &own_delta[..len])
+        }
+    };
+    gather_slow_block(simd, slow_sources, slow.previous, &mut carried_w[..len]);
+    slow_block(
+        simd,
+        slow_sources,
+        finish.alpha,
+        finish.beta,
+        finish.quadratic,
+        slow.retention,
+        zc_row,
+        slow_dz,
+        &carried_w[..len],
+        &mut slow.row[range],
+    );
 }
 
 /// Steps 3–8 on one block (f32 only; every slice a separate argument so the compiler knows
@@ -672,6 +812,102 @@ simd_kernel!(
         sampled: &mut [f32],
         carried_a: &mut [f32],
         carried_p: &mut [u8]
+    )
+);
+
+/// Gathers the previous slow-change evidence at the warp sources of one block (an invalid source
+/// reads the last pixel; [`slow_block`] discards it, as ΔZ is 0 there).
+#[inline(always)]
+fn gather_slow_block_generic(sources: &[u32], previous_w: &[f32], carried_w: &mut [f32]) {
+    let len = sources.len();
+    let last_pixel = previous_w.len() - 1;
+    let carried_w = &mut carried_w[..len];
+    for i in 0..len {
+        carried_w[i] = previous_w[(sources[i] as usize).min(last_pixel)];
+    }
+}
+
+simd_kernel!(
+    gather_slow_block,
+    gather_slow_block_avx2,
+    gather_slow_block_generic,
+    (sources: &[u32], previous_w: &[f32], carried_w: &mut [f32])
+);
+
+/// ΔZ of the geometric warp on one block (W's own warp): the previous compensated depth at the
+/// warp source minus the warped point's depth z′, where the pixel is measured and warped (0
+/// elsewhere; [`slow_block`] then resets W for want of a source).
+#[inline(always)]
+fn geometric_delta_block_generic(
+    sources: &[u32],
+    previous_zc: &[f32],
+    measured: &[f32],
+    qz: &[f32],
+    delta: &mut [f32],
+) {
+    let len = sources.len();
+    let last_pixel = previous_zc.len() - 1;
+    let (measured, qz, delta) = (&measured[..len], &qz[..len], &mut delta[..len]);
+    for i in 0..len {
+        let sampled = previous_zc[(sources[i] as usize).min(last_pixel)];
+        let valid = (sources[i] != NO_SOURCE) & (measured[i] > 0.0);
+        delta[i] = if valid { sampled - qz[i] } else { 0.0 };
+    }
+}
+
+simd_kernel!(
+    geometric_delta_block,
+    geometric_delta_block_avx2,
+    geometric_delta_block_generic,
+    (sources: &[u32], previous_zc: &[f32], measured: &[f32], qz: &[f32], delta: &mut [f32])
+);
+
+/// W of one block: retention · Ŵ + ΔZ where the pixel was warped, the background did not
+/// reappear (ΔZ > −τ_β) and nothing moved in front of it at once (ΔZ ≤ τ_α: an occlusion
+/// event is A's), else 0.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn slow_block_generic(
+    sources: &[u32],
+    alpha: f32,
+    beta: f32,
+    quadratic: bool,
+    retention: f32,
+    zc_row: &[f32],
+    dz_row: &[f32],
+    carried_w: &[f32],
+    w_row: &mut [f32],
+) {
+    let len = w_row.len();
+    let (sources, zc_row, dz_row, carried_w) =
+        (&sources[..len], &zc_row[..len], &dz_row[..len], &carried_w[..len]);
+    for i in 0..len {
+        let z_or_one = if quadratic { zc_row[i] } else { 1.0 };
+        let tau_alpha = alpha * zc_row[i] * z_or_one;
+        let tau_beta = beta * zc_row[i] * z_or_one;
+        let keep = (sources[i] != NO_SOURCE) & (dz_row[i] > -tau_beta) & (dz_row[i] <= tau_alpha);
+        w_row[i] = if keep {
+            retention * carried_w[i] + dz_row[i]
+        } else {
+            0.0
+        };
+    }
+}
+
+simd_kernel!(
+    slow_block,
+    slow_block_avx2,
+    slow_block_generic,
+    (
+        sources: &[u32],
+        alpha: f32,
+        beta: f32,
+        quadratic: bool,
+        retention: f32,
+        zc_row: &[f32],
+        dz_row: &[f32],
+        carried_w: &[f32],
+        w_row: &mut [f32]
     )
 );
 
@@ -836,15 +1072,13 @@ pub(super) fn object_mask_block_with(
     )
 }
 
-/// Reference implementation: the docs/method.md steps as separate full-image passes, with f64
-/// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
-pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutputs<'_>) -> TransportCounts {
+/// The scalar reference's warp field: per pixel the nearest previous pixel (None when invalid)
+/// and, where the current depth was used (`geometric` and measured), the warped point's depth z′.
+fn scalar_warp(inputs: &TransportInputs<'_>, geometric: bool) -> (Vec<Option<usize>>, Vec<Option<f32>>) {
     let size = inputs.depth_m.size();
     let (width, height) = (size.width, size.height);
-    // Step 2: warp field.
     let mut warp: Vec<Option<usize>> = vec![None; size.area()];
     let mut warped_depth: Vec<Option<f32>> = vec![None; size.area()];
-    let geometric = inputs.config.warp_depth == WarpDepth::Current;
     for y in 0..height {
         for x in 0..width {
             let measured = inputs.depth_m.get(x, y);
@@ -871,6 +1105,18 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutp
             }
         }
     }
+    (warp, warped_depth)
+}
+
+/// Reference implementation: the docs/method.md steps as separate full-image passes, with f64
+/// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
+pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutputs<'_>) -> TransportCounts {
+    let size = inputs.depth_m.size();
+    let width = size.width;
+    // Step 2: warp field (and W's geometric warp).
+    let geometric = inputs.config.warp_depth == WarpDepth::Current;
+    let (warp, warped_depth) = scalar_warp(inputs, geometric);
+    let (slow_warp, slow_warped_depth) = scalar_warp(inputs, true);
     // Steps 3–9, pixel by pixel in the documented order.
     let mut counts = TransportCounts::default();
     let config = inputs.config;
@@ -891,6 +1137,27 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutp
             a = 0.0;
         }
         let newly = (sampled == 0.0) != (compensated == 0.0);
+        if let (Some((previous_w, retention)), Some(w)) =
+            (inputs.slow_previous, outputs.slow_m.as_deref_mut())
+        {
+            let slow_source = slow_warp[i];
+            let carried_w = slow_source.map_or(0.0, |n| previous_w.as_slice()[n]);
+            let slow_sampled = slow_source.map_or(0.0, |n| inputs.compensated_previous_m.as_slice()[n]);
+            let delta_z = match (slow_source, slow_warped_depth[i]) {
+                (Some(_), Some(z_prime)) => slow_sampled - z_prime,
+                // Unmeasured: the release's comparison, which is 0 (compensated = sampled).
+                _ => 0.0,
+            };
+            let value = if slow_source.is_some()
+                && delta_z > -config.threshold(config.beta, compensated)
+                && delta_z <= config.threshold(config.alpha, compensated)
+            {
+                retention * carried_w + delta_z
+            } else {
+                0.0
+            };
+            w.set(x, y, value);
+        }
         outputs.compensated_m.set(x, y, compensated);
         if let Some(delta_z_m) = outputs.delta_z_m.as_deref_mut() {
             delta_z_m.set(x, y, delta_z);

@@ -198,6 +198,9 @@ pub struct FrameOutput<'a> {
     pub timestamp_ns: u64,
     /// Moving-object mask (empty on frames without depth).
     pub mask: &'a Mask,
+    /// The part of `mask` a closed loop's odometry ignores: `mask` without the detector's
+    /// slow-change evidence ([`crate::occlusion::OcclusionDetector::odometry_mask`]).
+    pub odometry_mask: &'a Mask,
     /// Motion from the previous frame's pose (identity for the first frame).
     pub current_from_previous: Isometry3<f64>,
     /// Camera pose: chained DVO motions from identity at the first frame, or the external pose.

@@ -441,7 +441,7 @@ impl Processor {
                         check_size("ignore_in_previous", extra.size(), size)?;
                     }
                     Some(self.ignore.build(
-                        self.detector.mask(),
+                        self.detector.odometry_mask(),
                         frame.ignore_in_previous,
                         self.detector.compensated_depth_m(),
                     )?)
@@ -520,9 +520,9 @@ impl Processor {
         stats.pose_us = started.elapsed().as_micros() as u64;
 
         let detect_started = Instant::now();
-        let (mask, accumulation_m) = if no_depth {
+        let (mask, odometry_mask, accumulation_m) = if no_depth {
             self.detector_skipped = self.detector_skipped.saturating_add(1);
-            (&self.empty_mask, &self.zero_accumulation_m)
+            (&self.empty_mask, &self.empty_mask, &self.zero_accumulation_m)
         } else {
             // The motion since the detector's previous frame.
             let current_from_reference = world_from_camera.inverse() * self.world_from_detector_reference;
@@ -537,7 +537,11 @@ impl Processor {
             stats.detector_reset |= stats.detector.motion_rejected;
             self.world_from_detector_reference = world_from_camera;
             self.detector_skipped = 0;
-            (self.detector.mask(), self.detector.accumulation_m())
+            (
+                self.detector.mask(),
+                self.detector.odometry_mask(),
+                self.detector.accumulation_m(),
+            )
         };
         stats.detector_us = detect_started.elapsed().as_micros() as u64;
         stats.moving_fraction = stats.detector.mask_pixels as f64 / size.area().max(1) as f64;
@@ -554,6 +558,7 @@ impl Processor {
             index,
             timestamp_ns: frame.timestamp_ns,
             mask,
+            odometry_mask,
             current_from_previous,
             world_from_camera,
             accumulation_m,

@@ -136,6 +136,9 @@ struct Buffered {
     has_depth: bool,
     /// The backward pass's mask.
     backward_mask: Mask,
+    /// The backward pass's mask without the slow-change evidence (the refinement's seed), when
+    /// the detector has that evidence; else the seed is `backward_mask`.
+    backward_odometry_mask: Option<Mask>,
 }
 
 /// Where a frame's result goes: called in frame order, from whichever of the pool's threads
@@ -172,6 +175,8 @@ struct FirstPass {
 struct LaterPasses {
     source: PoseSource,
     appearance_growth: bool,
+    /// The detector adds slow-change evidence that the odometry must not ignore.
+    slow_evidence: bool,
     /// Pass 2.
     backward: OcclusionDetector,
     /// Pass 3.
@@ -224,12 +229,19 @@ impl OfflineProcessor {
                     intrinsics.at_level(halvings as u32),
                     ProcessorConfig {
                         dvo,
-                        occlusion: reduced_occlusion_config(&config.occlusion, halvings),
+                        occlusion: first_pass_occlusion_config(&config.occlusion, halvings),
                         ..config
                     },
                 )?)
             }
-            PoseSource::DvoUnmasked => Some(Processor::new(size, intrinsics, config)?),
+            PoseSource::DvoUnmasked => Some(Processor::new(
+                size,
+                intrinsics,
+                ProcessorConfig {
+                    occlusion: first_pass_occlusion_config(&config.occlusion, 0),
+                    ..config
+                },
+            )?),
             PoseSource::External { .. } => None,
         };
         let refine = match config.pose_source {
@@ -264,6 +276,7 @@ impl OfflineProcessor {
             later: LaterPasses {
                 source: config.pose_source,
                 appearance_growth: config.occlusion.appearance_growth.is_some(),
+                slow_evidence: config.occlusion.slow_evidence.is_some(),
                 backward: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
                 refine: Processor::new(size, intrinsics, refine)?,
                 buffer: VecDeque::new(),
@@ -294,7 +307,11 @@ impl OfflineProcessor {
         let size = self.later.size;
         check_size("gray image", frame.gray.size(), size)?;
         check_size("depth image", frame.depth_m.size(), size)?;
-        let mut buffered = self.later.spare.pop().unwrap_or_else(|| Buffered::new(size));
+        let mut buffered = self
+            .later
+            .spare
+            .pop()
+            .unwrap_or_else(|| Buffered::new(size, self.later.slow_evidence));
         let (first, later, config) = (&mut self.first, &mut self.later, &self.config);
         let (first_done, later_done) = rayon::join(
             || first.run(frame, &mut buffered),
@@ -323,7 +340,7 @@ impl OfflineProcessor {
 }
 
 impl Buffered {
-    fn new(size: ImageSize) -> Self {
+    fn new(size: ImageSize, slow_evidence: bool) -> Self {
         Self {
             timestamp_ns: 0,
             gray: Image::filled(size, 0),
@@ -334,6 +351,7 @@ impl Buffered {
             first_reset: false,
             has_depth: false,
             backward_mask: Mask::filled(size, 0),
+            backward_odometry_mask: slow_evidence.then(|| Mask::filled(size, 0)),
         }
     }
 }
@@ -366,7 +384,7 @@ impl FirstPass {
                 buffered.world_from_camera = out.world_from_camera;
                 buffered.first_reset = out.stats.detector_reset;
                 if self.source == PoseSource::DvoClosedLoop {
-                    copy_or_enlarge_mask(out.mask, &mut buffered.first_mask);
+                    copy_or_enlarge_mask(out.odometry_mask, &mut buffered.first_mask);
                 }
             }
             None => {
@@ -420,6 +438,9 @@ impl LaterPasses {
             let frame = &mut self.buffer[j];
             if !frame.has_depth {
                 frame.backward_mask.fill(0);
+                if let Some(seed) = &mut frame.backward_odometry_mask {
+                    seed.fill(0);
+                }
                 continue;
             }
             let current_from_previous = reference.map_or_else(Isometry3::identity, |previous| {
@@ -439,6 +460,10 @@ impl LaterPasses {
                     .backward_mask
                     .as_mut_slice()
                     .copy_from_slice(mask.as_slice());
+                if let Some(seed) = &mut frame.backward_odometry_mask {
+                    seed.as_mut_slice()
+                        .copy_from_slice(self.backward.odometry_mask().as_slice());
+                }
             }
             reference = Some(frame.world_from_camera);
         }
@@ -503,7 +528,13 @@ impl LaterPasses {
                 .as_mut_slice()
                 .iter_mut()
                 .zip(frame.first_mask.as_slice())
-                .zip(frame.backward_mask.as_slice())
+                .zip(
+                    frame
+                        .backward_odometry_mask
+                        .as_ref()
+                        .unwrap_or(&frame.backward_mask)
+                        .as_slice(),
+                )
             {
                 *s = f | b;
             }
@@ -524,12 +555,16 @@ fn usable_halvings(size: ImageSize, requested: usize) -> usize {
         .count()
 }
 
-/// The detector's parameters for the image halved `halvings` times: the border margins (in
-/// pixels) shrink with it; the object size is given at VGA and scales by itself.
-fn reduced_occlusion_config(config: &OcclusionConfig, halvings: usize) -> OcclusionConfig {
+/// The first pass's detector parameters, for the image halved `halvings` times: the border
+/// margins (in pixels) shrink with it (the object size is given at VGA and scales by itself),
+/// and there is no slow-change evidence: the first pass's masks only seed the odometry of the
+/// later passes, which ignores that evidence ([`crate::occlusion::OcclusionDetector::odometry_mask`]),
+/// and the evidence does not enter the detector's state.
+fn first_pass_occlusion_config(config: &OcclusionConfig, halvings: usize) -> OcclusionConfig {
     OcclusionConfig {
         thin_structure_border_margin_px: config.thin_structure_border_margin_px >> halvings,
         prune_exit_margin_px: config.prune_exit_margin_px >> halvings,
+        slow_evidence: None,
         ..*config
     }
 }

@@ -32,10 +32,11 @@ use crate::common::{data, tum::TumSequence};
 /// Runs the detector with ground-truth poses; returns the per-frame false-positive fractions and
 /// the frames whose motion the detector rejected.
 fn false_positive_fractions(dir: &Path, intrinsics: PinholeIntrinsics) -> (Vec<f64>, Vec<usize>) {
+    let config = OcclusionConfig::default();
     let sequence = TumSequence::load(dir).unwrap();
     let truth = sequence.groundtruth();
     let size = ImageSize::new(640, 480);
-    let mut detector = OcclusionDetector::new(size, intrinsics, OcclusionConfig::default()).unwrap();
+    let mut detector = OcclusionDetector::new(size, intrinsics, config).unwrap();
     let mut previous: Option<Isometry3<f64>> = None;
     let mut fractions = Vec::new();
     let mut rejected = Vec::new();
@@ -101,9 +102,10 @@ fn tum_fr2_desk_static_with_ground_truth_poses_has_few_false_positives() {
     check("tum_fr2_desk_50", &fractions, 0.01);
 }
 
-/// Measured 0 % on every frame (2.23 % max on 24 frames before the motion check: bands along
-/// every depth edge left by frame 122's ground-truth motion, which fits the depth worse than no
-/// motion at all, docs/accuracy.md).
+/// Measured max 0.614 % (the slow-change evidence; the paper's accumulation alone flags nothing;
+/// 2.23 % max on 24 frames before the motion check: bands along every depth edge left by frame
+/// 122's ground-truth motion, which fits the depth worse than no motion at all,
+/// docs/accuracy.md). Bound: the 1 % limit.
 #[test]
 fn seven_scenes_redkitchen_static_with_ground_truth_poses_has_few_false_positives() {
     let Some(dir) = data::real_data(
@@ -321,12 +323,12 @@ mod bonn_crowd {
         );
     }
 
-    // Measured (docs/accuracy.md): offline ATE 0.044 m, rotation RPE 1.21°, F1 0.866; causal
-    // ATE 0.097 m, F1 0.764. Bounds 24–48 % above (ATE, RPE) or 0.03–0.05 below (F1): DVO's
+    // Measured (docs/accuracy.md): offline ATE 0.044 m, rotation RPE 1.21°, F1 0.879; causal
+    // ATE 0.097 m, F1 0.788. Bounds 24–48 % above (ATE, RPE) or 0.04 below (F1): DVO's
     // result moved by several millimetres with small changes elsewhere in the pipeline.
     const OFFLINE_ATE_BOUND_M: f64 = 0.065;
     const OFFLINE_ROTATION_RPE_BOUND_DEG: f64 = 1.8;
-    const OFFLINE_F1_BOUND: f64 = 0.82;
+    const OFFLINE_F1_BOUND: f64 = 0.84;
     const CAUSAL_ATE_BOUND_M: f64 = 0.12;
-    const CAUSAL_F1_BOUND: f64 = 0.73;
+    const CAUSAL_F1_BOUND: f64 = 0.75;
 }

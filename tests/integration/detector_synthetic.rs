@@ -11,7 +11,9 @@
 //! closed loop) at 320×240, against the targets F1 ≥ 0.85 with DVO over all frames, onset ≤ 5
 //! frames (`occmask::metrics::onset`) and static controls ≤ 0.5 % false positives. Where a
 //! class does not meet them yet, its test holds the figure the code meets (with the measured
-//! value and the margin stated) and an ignored test states the target.
+//! value and the margin stated) and an ignored test states the target. The head-on approach and
+//! the box sliding on a desk are found by the slow-change evidence (`OcclusionConfig::slow_evidence`,
+//! docs/method.md D16).
 #![allow(clippy::unwrap_used)]
 
 use occmask::image_buf::ImageSize;
@@ -239,18 +241,18 @@ fn failure_class_stop_and_go() {
 }
 
 /// Late onset, an object that rests for 1.5 s and then slides slowly (its own width in 43
-/// frames): below the targets. Measured F1 0.778, onset 24 frames; bounds F1 0.74, onset 28.
-/// The true pose reaches F1 0.917, onset 0: the closed loop's DVO treats the slowly moving box
-/// as background until it is masked.
+/// frames): below the targets. Measured F1 0.825, onset 21 frames (the paper's accumulation
+/// alone: 0.778, 24); bounds F1 0.79, onset 25. The true pose reaches F1 0.954, onset 0: the
+/// closed loop's DVO treats the slowly moving box as background until it is masked.
 #[test]
 fn failure_class_rests_then_moves_slowly() {
     let score = default_mode(Scenario::RestsThenMovesSlowly);
-    assert_class(&score, "rests_then_moves_slowly", 0.74, 28);
+    assert_class(&score, "rests_then_moves_slowly", 0.79, 25);
 }
 
-/// The target for [`failure_class_rests_then_moves_slowly`] (not met: F1 0.778, onset 24).
+/// The target for [`failure_class_rests_then_moves_slowly`] (not met: F1 0.825, onset 21).
 #[test]
-#[ignore = "not met by the default: F1 0.778, onset 24 frames"]
+#[ignore = "not met by the default: F1 0.825, onset 21 frames"]
 fn failure_class_rests_then_moves_slowly_target() {
     let score = default_mode(Scenario::RestsThenMovesSlowly);
     assert_class(
@@ -261,13 +263,16 @@ fn failure_class_rests_then_moves_slowly_target() {
     );
 }
 
-/// Head-on approach: never found (F1 0.000 in every mode, also with the true pose and with
-/// `sub_threshold_retention` 0.9). What the default does meet: the approaching box does not
-/// drag the odometry (measured ATE 2.7 cm over 105 frames; bound 4 cm) and nothing else is
-/// flagged (measured no false positive on the 15 frames before it moves).
+/// Head-on approach: the slow-change evidence finds it 8 frames after the box starts (it has
+/// come 0.19 m closer, 5 % of its depth; the evidence threshold is 4 %); the paper's
+/// accumulation alone never does. Measured F1 0.866, onset 8 (true pose 0.868, 8); bounds F1
+/// 0.83, onset 10. The approaching box does not drag the odometry (measured ATE 2.7 cm over 105
+/// frames; bound 4 cm) and nothing else is flagged (measured no false positive on the 15 frames
+/// before it moves).
 #[test]
-fn failure_class_head_on_approach_odometry() {
+fn failure_class_head_on_approach() {
     let score = default_mode(Scenario::HeadOnApproach);
+    assert_class(&score, "head_on_approach", 0.83, 10);
     assert!(score.ate_m <= 0.04, "ATE {:.3} m", score.ate_m);
     assert!(
         score.max_fp_fraction_without_objects <= STATIC_FP_LIMIT,
@@ -276,25 +281,29 @@ fn failure_class_head_on_approach_odometry() {
     );
 }
 
-/// The target for the head-on approach (not met: F1 0.000, never found).
+/// The target for the head-on approach (not met: onset 8 frames; 5 frames of approach are
+/// 3.5–4 % of the depth, at the synthetic sensor's disparity step of 2 %).
 #[test]
-#[ignore = "not met by the default: F1 0.000, never found"]
+#[ignore = "not met by the default: F1 0.866, onset 8 frames"]
 fn failure_class_head_on_approach_target() {
     let score = default_mode(Scenario::HeadOnApproach);
     assert_class(&score, "head_on_approach", CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
 }
 
-/// Near background, a box sliding on a desk: found only once its top passes in front of the
-/// far wall. Measured F1 0.615, onset 39 frames; bounds F1 0.57, onset 45.
+/// Near background, a box sliding on a desk: the sub-threshold steps with which it covers the
+/// desk add up in the slow-change evidence (the paper's accumulation alone finds it only where
+/// it passes in front of the far wall: F1 0.615, onset 39). Measured F1 0.821, onset 13 (true
+/// pose 0.831, 11); bounds F1 0.79, onset 16. Onset: the box enters at the border and is
+/// smaller than the object threshold until frame 9.
 #[test]
 fn failure_class_sliding_on_desk() {
     let score = default_mode(Scenario::SlidingOnDesk);
-    assert_class(&score, "sliding_on_desk", 0.57, 45);
+    assert_class(&score, "sliding_on_desk", 0.79, 16);
 }
 
-/// The target for [`failure_class_sliding_on_desk`] (not met: F1 0.615, onset 39).
+/// The target for [`failure_class_sliding_on_desk`] (not met: F1 0.821, onset 13).
 #[test]
-#[ignore = "not met by the default: F1 0.615, onset 39 frames"]
+#[ignore = "not met by the default: F1 0.821, onset 13 frames"]
 fn failure_class_sliding_on_desk_target() {
     let score = default_mode(Scenario::SlidingOnDesk);
     assert_class(&score, "sliding_on_desk", CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
@@ -339,12 +348,13 @@ fn failure_class_static_desk() {
     );
 }
 
-/// Held out (no default was tuned on these; reported apart, bounds looser): measured at
-/// 320×240 F1 / onset: in view at start 0.942 / 0, rests then moves 0.914 / 0, head-on 0.000 /
-/// never, sliding on the floor 0.000 / never, dominant from start 0.203 / never (ATE 0.036 m);
-/// static 0 % false positives. Bounds: the targets where they are met; dominant F1 0.12 and
-/// ATE 0.10 m; head-on and floor sliding are found nowhere and hold only their odometry
-/// (measured ATE 0.041 / 0.045 m; bound 0.08 m).
+/// Held out (no default was tuned on these; the slow-change evidence's parameters were chosen
+/// on the failure classes and the Bonn window, and these were run afterwards; reported apart,
+/// bounds looser): measured at 320×240 F1 / onset: in view at start 0.941 / 0, rests then
+/// moves 0.957 / 0, head-on 0.815 / 12, sliding on the floor 0.699 / 27, dominant from start
+/// 0.207 / never (ATE 0.036 m); static 0 % false positives. Bounds: the targets where they are
+/// met; head-on and floor sliding 0.04 below the F1 and 4 frames above the onset; dominant F1
+/// 0.12 and ATE 0.10 m.
 #[test]
 fn held_out_scenarios() {
     for scenario in Scenario::HELD_OUT {
@@ -354,6 +364,8 @@ fn held_out_scenarios() {
             Scenario::HeldOutInViewAtStart | Scenario::HeldOutRestsThenMoves => {
                 assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES)
             }
+            Scenario::HeldOutHeadOnApproach => assert_class(&score, name, 0.77, 16),
+            Scenario::HeldOutSlidingOnFloor => assert_class(&score, name, 0.66, 31),
             Scenario::HeldOutDominantFromStart => {
                 assert!(
                     score.segmentation.mean_f1 >= 0.12,
@@ -361,9 +373,6 @@ fn held_out_scenarios() {
                     score.segmentation.mean_f1
                 );
                 assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
-            }
-            Scenario::HeldOutHeadOnApproach | Scenario::HeldOutSlidingOnFloor => {
-                assert!(score.ate_m <= 0.08, "{name}: ATE {:.3} m", score.ate_m);
             }
             Scenario::HeldOutStatic => {
                 assert!(

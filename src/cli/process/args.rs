@@ -77,7 +77,7 @@ pub struct ProcessArgs {
 
     /// DVO, detector and failure-policy parameters from a JSON file: any subset of the fields
     /// `--print-config` prints (the others keep their defaults). Flags such as
-    /// --appearance-growth and --causal apply on top. Recorded in the output's occmask.process metadata.
+    /// --appearance-growth, --no-slow-evidence and --causal apply on top. Recorded in the output's occmask.process metadata.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
 
@@ -91,6 +91,11 @@ pub struct ProcessArgs {
     /// on people standing on a floor it leaks onto the floor, so it is off by default).
     #[arg(long)]
     pub appearance_growth: bool,
+
+    /// The paper's accumulation alone: no slow-change evidence (on by default; it finds objects
+    /// approaching head-on or moving just in front of the surface behind them).
+    #[arg(long)]
+    pub no_slow_evidence: bool,
 
     /// The default (kept for scripts written when completion was on by default).
     #[arg(long, hide = true, conflicts_with = "appearance_growth")]
