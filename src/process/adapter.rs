@@ -28,17 +28,6 @@ pub trait FrameProcessor {
     fn finish(&mut self) -> Result<Vec<FrameResult>> {
         Ok(Vec::new())
     }
-
-    /// A step of [`Self::finish`]: the next pending results, oldest first, and whether they
-    /// were the last (`true`). [`super::process_file`] hands each step's results to its writer
-    /// thread before asking for the next, so writing overlaps with the remaining work. The
-    /// default returns all of [`Self::finish`] in one step.
-    ///
-    /// # Errors
-    /// As [`Self::push`].
-    fn finish_step(&mut self) -> Result<(Vec<FrameResult>, bool)> {
-        Ok((self.finish()?, true))
-    }
 }
 
 /// Builds the processor once intrinsics and image size are known, from
@@ -114,19 +103,6 @@ impl FrameProcessor for PipelineProcessor {
             })?;
         }
         Ok(done)
-    }
-
-    fn finish_step(&mut self) -> Result<(Vec<FrameResult>, bool)> {
-        let keep_accumulation = self.keep_accumulation;
-        let mut done = Vec::new();
-        let last = match &mut self.pipeline {
-            Pipeline::Causal(_) => true,
-            Pipeline::Offline(processor) => processor.finish_step(&mut |out| {
-                done.push(out.to_result(keep_accumulation));
-                Ok(())
-            })?,
-        };
-        Ok((done, last))
     }
 }
 

@@ -110,17 +110,12 @@ impl FrameLoop {
             }
         }
         if end_of_stream {
-            // In steps, so the writer thread encodes the first results while the rest are
-            // processed.
-            while let Some(processor) = &mut self.processor {
+            if let Some(processor) = &mut self.processor {
                 let pipeline_start = Instant::now();
-                let (results, last) = processor.finish_step()?;
+                let results = processor.finish()?;
                 self.report.timings.pipeline_s += pipeline_start.elapsed().as_secs_f64();
                 for result in results {
                     self.write_result(ctx, output, hooks, result)?;
-                }
-                if last {
-                    break;
                 }
             }
             if !self.unanchored.is_empty() {
