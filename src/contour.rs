@@ -67,7 +67,12 @@ pub fn boundary_loops(mask: &Mask) -> Vec<Polygon> {
     // Out-edges per vertex as a 4-bit set of directions.
     let mut out = vec![0u8; vw * (h + 1)];
     let mut edges = 0usize;
-    for y in 0..h as i64 {
+    for (y, row) in mask.as_slice().chunks_exact(w.max(1)).take(h).enumerate() {
+        // Most rows of a mask have no set pixel: one pass over the row skips them.
+        if !row.contains(&MASK_SET) {
+            continue;
+        }
+        let y = y as i64;
         for x in 0..w as i64 {
             if !set(x, y) {
                 continue;

@@ -267,8 +267,8 @@ pub fn downsample_gray_into(src: &GrayF32, dst: &mut GrayF32) -> Result<()> {
                 let y = chunk * ROWS_PER_TASK + r;
                 let a = &src[2 * y * sw..2 * y * sw + 2 * dw];
                 let b = &src[(2 * y + 1) * sw..(2 * y + 1) * sw + 2 * dw];
-                for (x, o) in out.iter_mut().enumerate() {
-                    *o = 0.25 * (a[2 * x] + a[2 * x + 1] + b[2 * x] + b[2 * x + 1]);
+                for (o, (a, b)) in out.iter_mut().zip(a.chunks_exact(2).zip(b.chunks_exact(2))) {
+                    *o = 0.25 * (a[0] + a[1] + b[0] + b[1]);
                 }
             }
         });
@@ -277,8 +277,31 @@ pub fn downsample_gray_into(src: &GrayF32, dst: &mut GrayF32) -> Result<()> {
 
 /// The edge-aware depth of one 2×2 block (see the module docs): mean of the valid children
 /// within [`DEPTH_EDGE_RELATIVE`] of the nearest valid child; 0 when no child is valid.
+/// Branch-free: children that do not count add 0 (the sum stays exact) in the same order.
 #[inline]
 pub fn edge_aware_depth(children_m: [f32; 4]) -> f32 {
+    let far = |z: f32| if z > 0.0 { z } else { f32::INFINITY };
+    let nearest = far(children_m[0])
+        .min(far(children_m[1]))
+        .min(far(children_m[2]))
+        .min(far(children_m[3]));
+    let limit = nearest * (1.0 + DEPTH_EDGE_RELATIVE);
+    let (mut sum, mut n) = (0.0f32, 0.0f32);
+    for &z in &children_m {
+        let counts = z > 0.0 && z <= limit;
+        sum += if counts { z } else { 0.0 };
+        n += if counts { 1.0 } else { 0.0 };
+    }
+    if nearest.is_finite() {
+        sum / n
+    } else {
+        0.0
+    }
+}
+
+/// [`edge_aware_depth`] with branches: the reference it is tested against.
+#[cfg(test)]
+fn edge_aware_depth_reference(children_m: [f32; 4]) -> f32 {
     let mut nearest = f32::INFINITY;
     for &z in &children_m {
         if z > 0.0 && z < nearest {
@@ -359,11 +382,153 @@ fn clean_depth(z: f32) -> f32 {
 }
 
 /// Fills the packed per-pixel samples of one level (see [`TargetSample`]). Intensity gradients
-/// are central differences, one-sided on the image border.
+/// are central differences, one-sided on the image border. The border pixels of each row take
+/// the general path, the others a straight one (the tests check it against a reference with
+/// the border cases in every pixel).
 ///
 /// # Errors
 /// [`Error::SizeMismatch`] / [`Error::BufferLength`] when the sizes disagree.
 pub fn pack_samples_into(gray: &GrayF32, depth_m: &DepthMeters, samples: &mut [TargetSample]) -> Result<()> {
+    if depth_m.size() != gray.size() {
+        return Err(Error::SizeMismatch {
+            what: "pack_samples_into depth".into(),
+            expected: gray.size(),
+            found: depth_m.size(),
+        });
+    }
+    if samples.len() != gray.size().area() {
+        return Err(Error::BufferLength {
+            expected: gray.size().area(),
+            found: samples.len(),
+            size: gray.size(),
+        });
+    }
+    let (w, h) = (gray.width(), gray.height());
+    if w == 0 || h == 0 {
+        return Ok(());
+    }
+    let (g, d) = (gray.as_slice(), depth_m.as_slice());
+    // 1 / (distance between the two samples of a difference): ½ inside, 1 on the border, and 0
+    // for a one-pixel side (no derivative at all).
+    let inv_spacing = |i: usize, n: usize| -> f32 {
+        match (i > 0, i + 1 < n) {
+            (true, true) => 0.5,
+            (false, false) => 0.0,
+            _ => 1.0,
+        }
+    };
+    samples
+        .par_chunks_mut(w * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(chunk, rows)| {
+            for (r, out) in rows.chunks_exact_mut(w).enumerate() {
+                let y = chunk * ROWS_PER_TASK + r;
+                let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
+                let row = SampleRow {
+                    g: &g[y * w..(y + 1) * w],
+                    g_up: &g[up * w..(up + 1) * w],
+                    g_down: &g[down * w..(down + 1) * w],
+                    d: &d[y * w..(y + 1) * w],
+                    d_up: &d[up * w..(up + 1) * w],
+                    d_down: &d[down * w..(down + 1) * w],
+                    inv_dy: inv_spacing(y, h),
+                    // Depth neighbours outside the image read as invalid.
+                    has_up: y > 0,
+                    has_down: y + 1 < h,
+                };
+                if w < 3 {
+                    for (x, s) in out.iter_mut().enumerate() {
+                        *s = row.sample(x, inv_spacing(x, w));
+                    }
+                    continue;
+                }
+                out[0] = row.sample(0, inv_spacing(0, w));
+                out[w - 1] = row.sample(w - 1, inv_spacing(w - 1, w));
+                // Inside the row: both horizontal neighbours exist, and the vertical ones are
+                // 0 for every pixel of a border row. The same arithmetic as `sample`.
+                let zero_up = if row.has_up { 1.0 } else { 0.0 };
+                let zero_down = if row.has_down { 1.0 } else { 0.0 };
+                let inner = &mut out[1..w - 1];
+                for (i, s) in inner.iter_mut().enumerate() {
+                    let x = i + 1;
+                    let gx = (row.g[x + 1] - row.g[x - 1]) * 0.5;
+                    let gy = (row.g_down[x] - row.g_up[x]) * row.inv_dy;
+                    let z = clean_depth(row.d[x]);
+                    let zl = clean_depth(row.d[x - 1]);
+                    let zr = clean_depth(row.d[x + 1]);
+                    // clean_depth is finite: × 1 keeps it, × 0 gives 0 as `sample` reads.
+                    let zu = clean_depth(row.d_up[x]) * zero_up;
+                    let zd = clean_depth(row.d_down[x]) * zero_down;
+                    let zx = depth_derivative(zl, z, zr);
+                    let zy = depth_derivative(zu, z, zd);
+                    let poison = 0.0 * (zx + zy);
+                    let valid = z > 0.0;
+                    let pick = |v: f32| if valid { v + poison } else { f32::NAN };
+                    *s = TargetSample([row.g[x], gx, gy, pick(z), pick(zx), pick(zy), 0.0, 0.0]);
+                }
+            }
+        });
+    Ok(())
+}
+
+/// One row of [`pack_samples_into`] and its neighbours (the row itself on the border).
+struct SampleRow<'a> {
+    g: &'a [f32],
+    g_up: &'a [f32],
+    g_down: &'a [f32],
+    d: &'a [f32],
+    d_up: &'a [f32],
+    d_down: &'a [f32],
+    inv_dy: f32,
+    has_up: bool,
+    has_down: bool,
+}
+
+impl SampleRow<'_> {
+    /// The sample at `x`, any `x` (borders included); `inv_dx` as `inv_spacing`.
+    #[inline(always)]
+    fn sample(&self, x: usize, inv_dx: f32) -> TargetSample {
+        let w = self.g.len();
+        let (left, right) = (x.saturating_sub(1), (x + 1).min(w - 1));
+        let gx = (self.g[right] - self.g[left]) * inv_dx;
+        let gy = (self.g_down[x] - self.g_up[x]) * self.inv_dy;
+        let z = clean_depth(self.d[x]);
+        let (zv, zx, zy) = if z > 0.0 {
+            let zl = if x > 0 { clean_depth(self.d[left]) } else { 0.0 };
+            let zr = if x + 1 < w {
+                clean_depth(self.d[right])
+            } else {
+                0.0
+            };
+            let zu = if self.has_up {
+                clean_depth(self.d_up[x])
+            } else {
+                0.0
+            };
+            let zd = if self.has_down {
+                clean_depth(self.d_down[x])
+            } else {
+                0.0
+            };
+            let zx = depth_derivative(zl, z, zr);
+            let zy = depth_derivative(zu, z, zd);
+            // A NaN in either derivative makes the whole depth channel unusable.
+            let poison = 0.0 * (zx + zy);
+            (z + poison, zx + poison, zy + poison)
+        } else {
+            (f32::NAN, f32::NAN, f32::NAN)
+        };
+        TargetSample([self.g[x], gx, gy, zv, zx, zy, 0.0, 0.0])
+    }
+}
+
+/// [`pack_samples_into`] pixel by pixel with the border cases in every pixel: the reference
+/// it is tested against.
+///
+/// # Errors
+/// [`Error::SizeMismatch`] / [`Error::BufferLength`] when the sizes disagree.
+#[cfg(test)]
+fn pack_samples_reference(gray: &GrayF32, depth_m: &DepthMeters, samples: &mut [TargetSample]) -> Result<()> {
     if depth_m.size() != gray.size() {
         return Err(Error::SizeMismatch {
             what: "pack_samples_into depth".into(),
@@ -446,6 +611,64 @@ mod tests {
         let gray = GrayF32::from_fn(size, |x, y| (x as f32 * 0.01 + y as f32 * 0.002).fract());
         let depth = DepthMeters::from_fn(size, |x, y| 1.0 + 0.001 * (x + y) as f32);
         (gray, depth)
+    }
+
+    /// The branch-free edge-aware depth against the branching one, bit for bit, over blocks
+    /// of invalid (0, negative, NaN, infinite), equal, near and far children.
+    #[test]
+    fn edge_aware_depth_agrees_with_its_scalar_reference() {
+        let values = [
+            0.0,
+            -1.0,
+            f32::NAN,
+            f32::INFINITY,
+            1.0,
+            1.01,
+            1.02,
+            1.03,
+            1.5,
+            3.0,
+            0.3,
+        ];
+        for a in values {
+            for b in values {
+                for c in values {
+                    for d in values {
+                        let children = [a, b, c, d];
+                        assert_eq!(
+                            edge_aware_depth(children).to_bits(),
+                            edge_aware_depth_reference(children).to_bits(),
+                            "{children:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// The packed samples against the pixel-by-pixel reference, bit for bit (NaNs included),
+    /// on thin and odd sizes and on depth with holes, edges, NaN and infinity.
+    #[test]
+    fn packed_samples_agree_with_their_scalar_reference() {
+        for (width, height) in [(1, 1), (2, 1), (1, 3), (3, 2), (4, 4), (37, 23), (640, 480)] {
+            let size = ImageSize::new(width, height);
+            let gray = GrayF32::from_fn(size, |x, y| ((x * 13 + y * 7) % 31) as f32 / 31.0);
+            let depth = DepthMeters::from_fn(size, |x, y| match (x * 29 + y * 11) % 17 {
+                0 => 0.0,
+                1 => f32::NAN,
+                2 => f32::INFINITY,
+                3 => -1.0,
+                4 => 4.0, // a depth edge
+                k => 1.0 + 0.001 * (x + 2 * y) as f32 + 0.0001 * k as f32,
+            });
+            let mut fast = vec![TargetSample::default(); size.area()];
+            let mut reference = fast.clone();
+            pack_samples_into(&gray, &depth, &mut fast).unwrap();
+            pack_samples_reference(&gray, &depth, &mut reference).unwrap();
+            let bits =
+                |v: &[TargetSample]| -> Vec<u32> { v.iter().flat_map(|s| s.0.map(f32::to_bits)).collect() };
+            assert_eq!(bits(&fast), bits(&reference), "{width}x{height}");
+        }
     }
 
     #[test]

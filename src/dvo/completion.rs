@@ -177,8 +177,47 @@ impl IgnoreCompletion {
         Ok(added)
     }
 
-    /// The cell grid of `mask` and `depth_m`.
+    /// The cell grid of `mask` and `depth_m`, a cell row (two pixel rows) at a time and
+    /// branch-free. A partial cell at an odd right or bottom edge reads its one pixel column or
+    /// row twice, which changes neither "any set" nor the minimum.
     fn pool(&mut self, mask: &Mask, depth_m: &DepthMeters) {
+        let (w, h, cw) = (self.size.width, self.size.height, self.cells.width);
+        if cw == 0 {
+            return;
+        }
+        // Invalid depths (≤ 0 or NaN) count as infinitely far; a cell left infinite has none.
+        let far = |z: f32| if z > 0.0 { z } else { f32::INFINITY };
+        let none_if_far = |z: f32| if z == f32::INFINITY { 0.0 } else { z };
+        let (mask, depth) = (mask.as_slice(), depth_m.as_slice());
+        for (cy, (set_row, nearest_row)) in self
+            .set
+            .chunks_exact_mut(cw)
+            .zip(self.depth_m.chunks_exact_mut(cw))
+            .enumerate()
+        {
+            let y0 = cy * CELL_PX;
+            let y1 = (y0 + 1).min(h - 1);
+            let (m0, m1) = (&mask[y0 * w..][..w], &mask[y1 * w..][..w]);
+            let (d0, d1) = (&depth[y0 * w..][..w], &depth[y1 * w..][..w]);
+            let pairs = (m0.chunks_exact(CELL_PX).zip(m1.chunks_exact(CELL_PX)))
+                .zip(d0.chunks_exact(CELL_PX).zip(d1.chunks_exact(CELL_PX)));
+            for ((set, nearest), ((ma, mb), (da, db))) in
+                set_row.iter_mut().zip(nearest_row.iter_mut()).zip(pairs)
+            {
+                *set = (ma[0] | ma[1] | mb[0] | mb[1]) != 0;
+                *nearest = none_if_far(far(da[0]).min(far(da[1])).min(far(db[0])).min(far(db[1])));
+            }
+            if w % CELL_PX != 0 {
+                let x = w - 1;
+                set_row[cw - 1] = (m0[x] | m1[x]) != 0;
+                nearest_row[cw - 1] = none_if_far(far(d0[x]).min(far(d1[x])));
+            }
+        }
+    }
+
+    /// [`Self::pool`] pixel by pixel (the reference it is tested against).
+    #[cfg(test)]
+    fn pool_reference(&mut self, mask: &Mask, depth_m: &DepthMeters) {
         self.set.fill(false);
         // The nearest valid depth, branch-free: invalid pixels (≤ 0 or NaN) count as infinitely
         // far, and a cell left infinite has none.
@@ -386,6 +425,30 @@ mod tests {
             completion.complete(&Mask::filled(size, 0), &depth, &mut out),
             Err(Error::SizeMismatch { .. })
         ));
+    }
+
+    /// The cell-row pooling against the pixel-by-pixel one, on even and odd sizes with
+    /// scattered mask pixels and invalid depths.
+    #[test]
+    fn pooling_agrees_with_its_scalar_reference() {
+        for (width, height) in [(1, 1), (2, 2), (5, 3), (64, 48), (37, 23), (640, 480)] {
+            let size = ImageSize::new(width, height);
+            let depth = DepthMeters::from_fn(size, |x, y| match (x * 31 + y * 17) % 13 {
+                0 => 0.0,
+                1 => -0.5,
+                2 => f32::NAN,
+                3 => f32::INFINITY,
+                k => 0.5 + k as f32 * 0.37 + ((x * 7 + y * 3) % 29) as f32 * 0.013,
+            });
+            let mask = Mask::from_fn(size, |x, y| if (x * 11 + y * 7) % 19 == 0 { MASK_SET } else { 0 });
+            let mut fast = IgnoreCompletion::new(size, CONFIG).unwrap();
+            let mut reference = fast.clone();
+            fast.pool(&mask, &depth);
+            reference.pool_reference(&mask, &depth);
+            assert_eq!(fast.set, reference.set, "{width}x{height}");
+            let bits = |v: &[f32]| v.iter().map(|z| z.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fast.depth_m), bits(&reference.depth_m), "{width}x{height}");
+        }
     }
 
     /// The cell grid against a per-pixel reference, on an odd size (partial cells at the right

@@ -3,6 +3,7 @@
 //! pixel conversions to the pipeline's [`GrayF32`] and [`DepthMeters`].
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use rayon::prelude::*;
 
 use crate::error::{DecodeProblem, Error, ImageKind, Mismatch, Result};
 use crate::geometry::camera::PinholeIntrinsics;
@@ -709,16 +710,31 @@ pub fn read_poses(input: &super::McapInput, topic: &str) -> Result<Vec<crate::tr
     let Some(ct) = channel.channel_type.filter(|ct| ct.is_pose()) else {
         return Err(unsupported_schema(channel, POSE_SCHEMA));
     };
+    let topics = [topic.to_owned()];
+    let read = |time_range| {
+        let mut poses = Vec::new();
+        input.for_each_message(Some(&topics), time_range, |m| {
+            for s in decode_poses(ct, topic, &m.data)? {
+                poses.push(crate::trajectory::StampedPose {
+                    timestamp_ns: s.timestamp_ns,
+                    world_from_camera: s.parent_from_child,
+                });
+            }
+            Ok(true)
+        })?;
+        Ok(poses)
+    };
+    // A pose stream is spread over the whole file: every chunk is decompressed for it. The
+    // parts of the file are read side by side (on the caller's rayon pool) and joined in order.
+    let parts: Vec<Result<Vec<_>>> = input
+        .log_time_parts(rayon::current_num_threads())
+        .into_par_iter()
+        .map(read)
+        .collect();
     let mut poses = Vec::new();
-    input.for_each_message(Some(&[topic.to_owned()]), None, |m| {
-        for s in decode_poses(ct, topic, &m.data)? {
-            poses.push(crate::trajectory::StampedPose {
-                timestamp_ns: s.timestamp_ns,
-                world_from_camera: s.parent_from_child,
-            });
-        }
-        Ok(true)
-    })?;
+    for part in parts {
+        poses.extend(part?);
+    }
     poses.sort_by_key(|p| p.timestamp_ns);
     poses.dedup_by_key(|p| p.timestamp_ns);
     Ok(poses)

@@ -423,6 +423,36 @@ impl McapInput {
         self.summary.is_some()
     }
 
+    /// Consecutive log-time ranges `[start, end)` that together hold every message, for
+    /// reading a file in `parts` side by side: each range starts at a chunk's first message and
+    /// holds about as many chunks as the others, so each chunk is decompressed by one reader
+    /// (or two, where chunks overlap in time). [`Self::for_each_message`] over each range in
+    /// turn gives the messages of one read over all of them, in the same order. A single
+    /// `None` (everything) for files read without indexes or with fewer chunks than `parts`.
+    pub fn log_time_parts(&self, parts: usize) -> Vec<Option<(u64, u64)>> {
+        let Some(summary) = &self.summary else {
+            return vec![None];
+        };
+        let chunks = &summary.chunk_indexes;
+        // A message at u64::MAX is in no range `[start, end)`.
+        if parts < 2 || chunks.len() < parts || chunks.iter().any(|c| c.message_end_time == u64::MAX) {
+            return vec![None];
+        }
+        let mut starts: Vec<u64> = chunks.iter().map(|c| c.message_start_time).collect();
+        starts.sort_unstable();
+        let mut ranges = Vec::with_capacity(parts);
+        let mut start = 0;
+        for k in 1..parts {
+            let end = starts[k * starts.len() / parts];
+            if end > start {
+                ranges.push(Some((start, end)));
+                start = end;
+            }
+        }
+        ranges.push(Some((start, u64::MAX)));
+        ranges
+    }
+
     /// Total messages, when known from the summary or the linear scan.
     pub fn message_count(&self) -> Option<u64> {
         self.channels.values().map(|c| c.message_count).sum()
@@ -642,5 +672,60 @@ fn channel_info(c: &Arc<mcap::Channel<'static>>, count: Option<u64>) -> InputCha
         channel_type: ChannelType::classify(&schema_name, &c.message_encoding),
         schema_name,
         message_count: count,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every message of `input` (all, or the parts in turn) as (channel, log time, data).
+    fn messages(input: &McapInput, ranges: &[Option<(u64, u64)>]) -> Vec<(u16, u64, Vec<u8>)> {
+        let mut out = Vec::new();
+        for &range in ranges {
+            input
+                .for_each_message(None, range, |m| {
+                    out.push((m.header.channel_id, m.header.log_time, m.data));
+                    Ok(true)
+                })
+                .unwrap();
+        }
+        out
+    }
+
+    #[test]
+    fn log_time_parts_read_in_turn_give_the_messages_of_one_read() {
+        // Small chunks; equal log times within and across chunks, a chunk that starts before
+        // the previous one ends (a message written late), two channels.
+        let mut writer = mcap::WriteOptions::new()
+            .chunk_size(Some(64))
+            .compression(None)
+            .create(std::io::Cursor::new(Vec::new()))
+            .unwrap();
+        let channels: Vec<u16> = ["/a", "/b"]
+            .iter()
+            .map(|topic| writer.add_channel(0, topic, "raw", &BTreeMap::new()).unwrap())
+            .collect();
+        let times = [0u64, 5, 5, 5, 10, 12, 12, 3, 20, 20, 21, 30, 30, 30, 31, 40];
+        for (i, &t) in times.iter().enumerate() {
+            let header = mcap::records::MessageHeader {
+                channel_id: channels[i % 2],
+                sequence: i as u32,
+                log_time: t,
+                publish_time: t,
+            };
+            writer.write_to_known_channel(&header, &[i as u8; 40]).unwrap();
+        }
+        writer.finish().unwrap();
+        let bytes = writer.into_inner().into_inner();
+        let input = McapInput::from_bytes(bytes, Path::new("parts.mcap")).unwrap();
+        let whole = messages(&input, &[None]);
+        assert_eq!(whole.len(), times.len());
+        for parts in 2..6 {
+            let ranges = input.log_time_parts(parts);
+            assert!(ranges.len() > 1, "{parts} parts: {ranges:?}");
+            assert_eq!(messages(&input, &ranges), whole, "{parts} parts: {ranges:?}");
+        }
+        assert_eq!(input.log_time_parts(1), vec![None]);
     }
 }
