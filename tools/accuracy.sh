@@ -48,7 +48,7 @@ section_synthetic() {
   echo "border; exact ground-truth masks and poses. Mean F1 over the frames with a moving object."
   echo "Commands: \`cargo run --release --example detector_accuracy -- synthetic all true|dvo\`,"
   echo "with \`OCC_GROWTH=1\` for appearance-gated completion (off by default, D8 of"
-  echo "[method.md](method.md); the default is the paper's detector). The causal pipeline, one pass."
+  echo "[method.md](method.md); the default adds the slow-change evidence of D16 to the paper's detector). The causal pipeline, one pass."
   echo "Targets: F1 ≥ 0.90 with the true pose, ≥ 0.85 closed loop."
   echo
   local mode growth

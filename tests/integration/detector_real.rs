@@ -102,7 +102,7 @@ fn tum_fr2_desk_static_with_ground_truth_poses_has_few_false_positives() {
     check("tum_fr2_desk_50", &fractions, 0.01);
 }
 
-/// Measured max 0.614 % (the slow-change evidence; the paper's accumulation alone flags nothing;
+/// Measured max 0.626 % (the slow-change evidence; the paper's accumulation alone flags nothing;
 /// 2.23 % max on 24 frames before the motion check: bands along every depth edge left by frame
 /// 122's ground-truth motion, which fits the depth worse than no motion at all,
 /// docs/accuracy.md). Bound: the 1 % limit.
