@@ -90,16 +90,20 @@ pub struct OcclusionConfig {
     pub prune_exit_margin_px: usize,
     /// Motion check (not in the paper): when the given motion explains the depth worse than no
     /// motion at all by more than this margin (a fraction of the sampled pixels, see
-    /// [`consistency::depth_consistency`](super::consistency::depth_consistency)), the motion is taken to be wrong and the detector
+    /// [`consistency::depth_consistency`]), the motion is taken to be wrong and the detector
     /// restarts from this frame instead of accumulating misregistered depth edges (which would
     /// stay in A as static false positives). `None` = trust every motion (the release).
+    ///
+    /// [`consistency::depth_consistency`]: super::consistency::depth_consistency
     pub motion_check_margin: Option<f32>,
     /// Appearance-gated object completion (not in the paper, see [`AppearanceGrowthConfig`]):
     /// after the mask is final, objects grow into neighbouring pixels with continuous depth
     /// whose intensity changed against the previous image warped with the camera motion. Needs
-    /// the gray image ([`OcclusionDetector::update_with_gray`](super::OcclusionDetector::update_with_gray)); `None` = off (the paper, and
+    /// the gray image ([`OcclusionDetector::update_with_gray`]); `None` = off (the paper, and
     /// the default: on real people the changing shadows at their feet let it grow over the
     /// floor, which then misleads the closed loop's odometry; docs/method.md has the figures).
+    ///
+    /// [`OcclusionDetector::update_with_gray`]: super::OcclusionDetector::update_with_gray
     pub appearance_growth: Option<AppearanceGrowthConfig>,
     /// Slow-change evidence (not in the paper, see [`SlowEvidenceConfig`]): a leaky sum of ΔZ
     /// beside A, cleared of the camera motion's error, whose large components join the mask: an

@@ -43,6 +43,8 @@ fn scalar_warp(inputs: &TransportInputs<'_>, geometric: bool) -> (Vec<Option<usi
 
 /// Reference implementation: the docs/method.md steps as separate full-image passes, with f64
 /// nalgebra transforms and [`PinholeIntrinsics::project`]. Slow; for tests.
+///
+/// [`PinholeIntrinsics::project`]: crate::geometry::PinholeIntrinsics::project
 pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutputs<'_>) -> TransportCounts {
     let size = inputs.depth_m.size();
     let width = size.width;
