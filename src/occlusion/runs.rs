@@ -5,8 +5,8 @@
 //! component's runs in row-major order. Work and memory scale with the number of runs, not
 //! pixels: the object sets labelled here are a few large blobs (tens of thousands of pixels in
 //! a few hundred runs), where a per-pixel flood fill writes a 4-byte label and a 4-byte list
-//! entry for every pixel. Reference: the flood fill `components::flood_scalar` (agreement
-//! tests in components.rs).
+//! entry for every pixel. Reference: the flood fill `components::oracles::flood_scalar`
+//! (agreement tests in components/tests.rs).
 
 use super::components::{position_nonzero_u8, position_zero_u8};
 

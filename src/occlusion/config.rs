@@ -1,0 +1,203 @@
+//! The detector's parameters: [`OcclusionConfig`] with its defaults and checks, and the
+//! choices its fields name ([`ThresholdForm`], [`WarpDepth`], [`Adjacency`]).
+
+use serde::{Deserialize, Serialize};
+
+use super::{scaled_pixels, AppearanceGrowthConfig, SlowEvidenceConfig};
+use crate::error::{Error, Result};
+use crate::image_buf::ImageSize;
+
+/// Functional form of the truncation thresholds τ_α and τ_β (paper Eq. 4–6; docs/method.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ThresholdForm {
+    /// τ = coefficient · Z (the authors' release; coefficients in m/m, i.e. unitless).
+    #[default]
+    Linear,
+    /// τ = coefficient · Z² (the paper's Eq. 4; coefficients in 1/m).
+    Quadratic,
+}
+
+/// Which depth back-projects a current pixel for the warp, and what ΔZ compares (paper Eq. 1–2;
+/// docs/method.md step 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WarpDepth {
+    /// The release: back-project pixel u with the previous compensated depth Zc_i(u) and compare
+    /// raw depths, ΔZ = Zc_i(n(u)) − Zc_{i+1}(u).
+    #[default]
+    PreviousCompensated,
+    /// A true backward warp where the current depth is measured: back-project with Z_{i+1}(u),
+    /// and compare with the warped point's depth z′ in the previous camera,
+    /// ΔZ = Zc_i(n(u)) − z′; unmeasured pixels fall back to the release rule.
+    Current,
+}
+
+/// Adjacency used by the pruning test of predicted areas (docs/method.md step 12).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Adjacency {
+    /// Left, right, up, down (the release's stencil intent).
+    #[default]
+    Four,
+    /// The 8 surrounding pixels.
+    Eight,
+}
+
+/// Every parameter of the detector, with the release defaults (docs/method.md, "Parameters").
+///
+/// Serialised (JSON config files) field by field with these names; missing fields take the
+/// default, unknown ones are an error; `null` switches an optional stage off.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OcclusionConfig {
+    /// α of τ_α: accumulation below τ_α is not an object (unitless for linear, 1/m for quadratic).
+    pub alpha: f32,
+    /// β of τ_β: a depth increase ΔZ ≤ −τ_β (background reappears) resets the accumulation.
+    pub beta: f32,
+    /// Linear (release) or quadratic (paper) thresholds.
+    pub threshold_form: ThresholdForm,
+    /// Fraction of an accumulation at or below τ_α kept for the next frame (0 = the paper's
+    /// truncation, Eq. 5, which clears it). Above 0 the accumulation is leaky: a slow, steady
+    /// depth decrease (an object approaching head-on) adds up over frames instead of being
+    /// cleared every frame, while noise decays. Values in [0, 1).
+    pub sub_threshold_retention: f32,
+    /// Minimum object component size at 640 × 480 in pixels; scaled by image area.
+    pub min_object_pixels_vga: usize,
+    /// Prediction only crosses 4-neighbour edges whose depth step is below this (m).
+    pub prediction_depth_gate_m: f32,
+    /// Prediction stops after a ring that contributed at most this many neighbour terms.
+    pub prediction_stop_terms: usize,
+    /// Grow accumulation into the newly discovered area (Eq. 10); off = skip prediction and pruning.
+    pub predict_newly_discovered: bool,
+    /// Adjacency of the pruning test.
+    pub prune_adjacency: Adjacency,
+    /// Warp depth and ΔZ comparison.
+    pub warp_depth: WarpDepth,
+    /// Radius r (px) of a square (2r+1)² morphological opening of {A > τ_α} before labelling:
+    /// object structures thinner than 2r+1 px are erased from A like small components (except
+    /// near the border, see `thin_structure_border_margin_px`). 0 = off (the release). Not in the paper: it
+    /// removes the 1–3 px strips that flickering Kinect depth edges leave along long edges of
+    /// static scenes (see docs/method.md, "Deviations").
+    pub thin_structure_radius_px: usize,
+    /// Thin structures within this many pixels of the image border are kept: objects entering
+    /// the view start as thin slivers there.
+    pub thin_structure_border_margin_px: usize,
+    /// A predicted component that is not attached to a non-predicted object pixel is still kept
+    /// when it holds pixels that were predicted object in the previous frame and it reaches
+    /// within this many pixels of the image border: an object leaving the view loses its
+    /// non-predicted part through the border first. 0 = prune it (the release).
+    pub prune_exit_margin_px: usize,
+    /// Motion check (not in the paper): when the given motion explains the depth worse than no
+    /// motion at all by more than this margin (a fraction of the sampled pixels, see
+    /// [`consistency::depth_consistency`]), the motion is taken to be wrong and the detector
+    /// restarts from this frame instead of accumulating misregistered depth edges (which would
+    /// stay in A as static false positives). `None` = trust every motion (the release).
+    ///
+    /// [`consistency::depth_consistency`]: super::consistency::depth_consistency
+    pub motion_check_margin: Option<f32>,
+    /// Appearance-gated object completion (not in the paper, see [`AppearanceGrowthConfig`]):
+    /// after the mask is final, objects grow into neighbouring pixels with continuous depth
+    /// whose intensity changed against the previous image warped with the camera motion. Needs
+    /// the gray image ([`OcclusionDetector::update_with_gray`]); `None` = off (the paper, and
+    /// the default: on real people the changing shadows at their feet let it grow over the
+    /// floor, which then misleads the closed loop's odometry; docs/method.md has the figures).
+    ///
+    /// [`OcclusionDetector::update_with_gray`]: super::OcclusionDetector::update_with_gray
+    pub appearance_growth: Option<AppearanceGrowthConfig>,
+    /// Slow-change evidence (not in the paper, see [`SlowEvidenceConfig`]): a leaky sum of ΔZ
+    /// beside A, cleared of the camera motion's error, whose large components join the mask: an
+    /// object approaching head-on or covering a surface just behind it, whose ΔZ per frame stays
+    /// below τ_α. On by default (measured on the synthetic failure classes and on real people,
+    /// docs/method.md D16), for images of at least 240 px on the short side; `None` = off (the
+    /// paper's accumulation alone).
+    pub slow_evidence: Option<SlowEvidenceConfig>,
+}
+
+impl Default for OcclusionConfig {
+    fn default() -> Self {
+        Self {
+            alpha: 0.15,
+            beta: 0.225,
+            threshold_form: ThresholdForm::Linear,
+            sub_threshold_retention: 0.0,
+            min_object_pixels_vga: 500,
+            prediction_depth_gate_m: 0.05,
+            prediction_stop_terms: 10,
+            predict_newly_discovered: true,
+            prune_adjacency: Adjacency::Four,
+            warp_depth: WarpDepth::PreviousCompensated,
+            thin_structure_radius_px: 1,
+            thin_structure_border_margin_px: 16,
+            prune_exit_margin_px: EXIT_MARGIN_PX,
+            motion_check_margin: Some(MOTION_CHECK_MARGIN),
+            appearance_growth: None,
+            slow_evidence: Some(SlowEvidenceConfig::default()),
+        }
+    }
+}
+
+/// Default `motion_check_margin`. Measured (docs/accuracy.md): with correct motions
+/// the motion's consistency minus identity's is ≥ −0.02 on every synthetic frame and ≥ −0.07 on
+/// the real TUM / 7-Scenes frames; the two ground-truth glitches found there score −0.18 and
+/// −0.23. 0.1 lies between.
+const MOTION_CHECK_MARGIN: f32 = 0.1;
+
+/// Default `prune_exit_margin_px`: the Kinect leaves a few invalid pixels along the border and
+/// the prediction never writes the outermost ring, so a leaving object's remainder ends a few
+/// pixels inside the image; 8 px covers that with room for the warp's rounding.
+const EXIT_MARGIN_PX: usize = 8;
+
+impl OcclusionConfig {
+    /// Checks every parameter.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the first bad parameter.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |name: &'static str, value: f32| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::InvalidParameter {
+                    name,
+                    value: value.to_string(),
+                    expected: "a finite number > 0".into(),
+                })
+            }
+        };
+        positive("alpha", self.alpha)?;
+        positive("beta", self.beta)?;
+        positive("prediction_depth_gate_m", self.prediction_depth_gate_m)?;
+        if !(0.0..1.0).contains(&self.sub_threshold_retention) {
+            return Err(Error::InvalidParameter {
+                name: "sub_threshold_retention",
+                value: self.sub_threshold_retention.to_string(),
+                expected: "a fraction in [0, 1)".into(),
+            });
+        }
+        if let Some(margin) = self.motion_check_margin {
+            positive("motion_check_margin", margin)?;
+        }
+        if let Some(growth) = &self.appearance_growth {
+            growth.validate()?;
+        }
+        if let Some(slow) = &self.slow_evidence {
+            slow.validate()?;
+        }
+        Ok(())
+    }
+
+    /// Minimum object component size for an image of `size` (500 px × area / VGA area, ≥ 1).
+    pub fn min_object_pixels(&self, size: ImageSize) -> usize {
+        scaled_pixels(self.min_object_pixels_vga, size)
+    }
+
+    /// τ for depth `z_m` with coefficient `coefficient` in this config's form.
+    #[inline]
+    pub fn threshold(&self, coefficient: f32, z_m: f32) -> f32 {
+        match self.threshold_form {
+            ThresholdForm::Linear => coefficient * z_m,
+            ThresholdForm::Quadratic => coefficient * z_m * z_m,
+        }
+    }
+}
