@@ -242,7 +242,11 @@ impl SlowScratch {
 
 /// Fits the motion error over the background (see the module docs); None when there are too
 /// few samples, the system is singular or the fit is not a small error.
-fn fit_motion_error(frame: &SlowFrame<'_>, scratch: &mut SlowScratch) -> Option<(Vector6<f64>, f32)> {
+fn fit_motion_error(
+    frame: &SlowFrame<'_>,
+    model: &PixelModel,
+    scratch: &mut SlowScratch,
+) -> Option<(Vector6<f64>, f32)> {
     let (width, height) = (frame.depth_m.width(), frame.depth_m.height());
     if width < 3 || height < 3 {
         return None;
@@ -251,7 +255,6 @@ fn fit_motion_error(frame: &SlowFrame<'_>, scratch: &mut SlowScratch) -> Option<
         .sqrt()
         .round()
         .max(1.0) as usize;
-    let model = PixelModel::new(frame.previous_from_current, frame.intrinsics);
     let (z, dz, mask) = (
         frame.depth_m.as_slice(),
         frame.w_m.as_slice(),
@@ -434,12 +437,12 @@ const SHARE_MARGIN: f32 = 1.5;
 /// fitted share and the evidence's bounding box.
 pub(super) fn update(frame: &SlowFrame<'_>, scratch: &mut SlowScratch, evidence: &mut [u8]) -> SlowCounts {
     let (width, height) = (frame.depth_m.width(), frame.depth_m.height());
+    let model = PixelModel::new(frame.previous_from_current, frame.intrinsics);
     let xi = if frame.config.motion_error_correction {
-        fit_motion_error(frame, scratch)
+        fit_motion_error(frame, &model, scratch)
     } else {
         None
     };
-    let model = PixelModel::new(frame.previous_from_current, frame.intrinsics);
     // Pre-test W > (α − margin·largest share)·Z, then the exact test on the pixels it passes.
     let correction = xi
         .filter(|&(_, largest)| largest > NEGLIGIBLE_SHARE * frame.config.alpha)

@@ -175,8 +175,6 @@ struct FirstPass {
 struct LaterPasses {
     source: PoseSource,
     appearance_growth: bool,
-    /// The detector adds slow-change evidence that the odometry must not ignore.
-    slow_evidence: bool,
     /// Pass 2.
     backward: OcclusionDetector,
     /// Pass 3.
@@ -276,7 +274,6 @@ impl OfflineProcessor {
             later: LaterPasses {
                 source: config.pose_source,
                 appearance_growth: config.occlusion.appearance_growth.is_some(),
-                slow_evidence: config.occlusion.slow_evidence.is_some(),
                 backward: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
                 refine: Processor::new(size, intrinsics, refine)?,
                 buffer: VecDeque::new(),
@@ -307,11 +304,10 @@ impl OfflineProcessor {
         let size = self.later.size;
         check_size("gray image", frame.gray.size(), size)?;
         check_size("depth image", frame.depth_m.size(), size)?;
-        let mut buffered = self
-            .later
-            .spare
-            .pop()
-            .unwrap_or_else(|| Buffered::new(size, self.later.slow_evidence));
+        let mut buffered = self.later.spare.pop().unwrap_or_else(|| {
+            // The detector leaves the evidence out on small images (then the two masks agree).
+            Buffered::new(size, self.later.backward.config().slow_evidence.is_some())
+        });
         let (first, later, config) = (&mut self.first, &mut self.later, &self.config);
         let (first_done, later_done) = rayon::join(
             || first.run(frame, &mut buffered),
