@@ -55,52 +55,12 @@ pub fn signed_area(polygon: &[[f64; 2]]) -> f64 {
 /// All boundary loops of the set pixels, as corner lists (only direction changes kept).
 /// Outer loops have positive [`signed_area`], holes negative.
 pub fn boundary_loops(mask: &Mask) -> Vec<Polygon> {
-    let (w, h) = (mask.width(), mask.height());
-    let vw = w + 1;
-    let set = |x: i64, y: i64| {
-        x >= 0
-            && y >= 0
-            && (x as usize) < w
-            && (y as usize) < h
-            && mask.get(x as usize, y as usize) == MASK_SET
-    };
-    // Out-edges per vertex as a 4-bit set of directions.
-    let mut out = vec![0u8; vw * (h + 1)];
-    let mut edges = 0usize;
-    for (y, row) in mask.as_slice().chunks_exact(w.max(1)).take(h).enumerate() {
-        // Most rows of a mask have no set pixel: one pass over the row skips them.
-        if !row.contains(&MASK_SET) {
-            continue;
-        }
-        let y = y as i64;
-        for x in 0..w as i64 {
-            if !set(x, y) {
-                continue;
-            }
-            let mut add = |vx: i64, vy: i64, dir: usize| {
-                out[vy as usize * vw + vx as usize] |= 1 << dir;
-                edges += 1;
-            };
-            if !set(x, y - 1) {
-                add(x, y, 0); // top border, walking right
-            }
-            if !set(x + 1, y) {
-                add(x + 1, y, 1); // right border, walking down
-            }
-            if !set(x, y + 1) {
-                add(x + 1, y + 1, 2); // bottom border, walking left
-            }
-            if !set(x - 1, y) {
-                add(x, y + 1, 3); // left border, walking up
-            }
-        }
-    }
+    let (mut out, mut edges) = boundary_edges(mask);
+    let vw = mask.width() + 1;
     let mut loops = Vec::new();
     let mut start_index = 0;
     while edges > 0 {
-        while out[start_index] == 0 {
-            start_index += 1;
-        }
+        start_index = first_nonzero_from(&out, start_index);
         let (sx, sy) = ((start_index % vw) as i64, (start_index / vw) as i64);
         let mut dir = out[start_index].trailing_zeros() as usize;
         let (mut x, mut y) = (sx, sy);
@@ -135,6 +95,80 @@ pub fn boundary_loops(mask: &Mask) -> Vec<Polygon> {
         loops.push(polygon);
     }
     loops
+}
+
+/// Out-edges per pixel corner (row-major over the `(width + 1) × (height + 1)` corners) as a
+/// 4-bit set of [`DIRS`] indices, and their count: each border of a set pixel, directed with
+/// the pixel on its right-hand side.
+fn boundary_edges(mask: &Mask) -> (Vec<u8>, usize) {
+    let (w, h) = (mask.width(), mask.height());
+    let vw = w + 1;
+    let mut out = vec![0u8; vw * (h + 1)];
+    let mut edges = 0usize;
+    if w == 0 || h == 0 {
+        return (out, edges);
+    }
+    let rows: Vec<&[u8]> = mask.as_slice().chunks_exact(w).take(h).collect();
+    let outside = vec![0u8; w];
+    for (y, &row) in rows.iter().enumerate() {
+        let above = if y > 0 { rows[y - 1] } else { &outside[..] };
+        let below = rows.get(y + 1).copied().unwrap_or(&outside[..]);
+        let (upper, lower) = out.split_at_mut((y + 1) * vw);
+        let (corners_above, corners_below) = (&mut upper[y * vw..], &mut lower[..vw]);
+        // Runs of set pixels: a left border at the run's first pixel, a right border at its
+        // last, and top and bottom borders wherever the row above or below is not set.
+        let mut x = 0;
+        while let Some(offset) = row[x..].iter().position(|&v| v == MASK_SET) {
+            let start = x + offset;
+            let end = row[start..]
+                .iter()
+                .position(|&v| v != MASK_SET)
+                .map_or(w, |n| start + n);
+            // Left border walking up from (start, y + 1), right border walking down from (end, y).
+            corners_below[start] |= 1 << 3;
+            corners_above[end] |= 1 << 1;
+            edges += 2;
+            // Top borders walk right from (x, y), bottom borders walk left from (x + 1, y + 1).
+            for (((corner_above, corner_below), &a), &b) in corners_above[start..end]
+                .iter_mut()
+                .zip(&mut corners_below[start + 1..=end])
+                .zip(&above[start..end])
+                .zip(&below[start..end])
+            {
+                let (top, bottom) = (u8::from(a != MASK_SET), u8::from(b != MASK_SET));
+                *corner_above |= top;
+                *corner_below |= bottom << 2;
+                edges += usize::from(top + bottom);
+            }
+            x = end;
+        }
+    }
+    (out, edges)
+}
+
+/// Index of the first nonzero byte of `bytes` at or after `from` (`bytes.len()` if none), eight
+/// bytes at a time: the corner grid is mostly zero.
+fn first_nonzero_from(bytes: &[u8], from: usize) -> usize {
+    let mut i = from;
+    while i % 8 != 0 && i < bytes.len() {
+        if bytes[i] != 0 {
+            return i;
+        }
+        i += 1;
+    }
+    for word in bytes[i..].chunks_exact(8) {
+        let value = u64::from_le_bytes([
+            word[0], word[1], word[2], word[3], word[4], word[5], word[6], word[7],
+        ]);
+        if value != 0 {
+            return i + value.trailing_zeros() as usize / 8;
+        }
+        i += 8;
+    }
+    bytes[i..]
+        .iter()
+        .position(|&b| b != 0)
+        .map_or(bytes.len(), |n| i + n)
 }
 
 fn out_dir_of(polygon: &[[f64; 2]]) -> usize {
@@ -261,6 +295,54 @@ mod tests {
             let total: f64 = boundary_loops(&m).iter().map(|p| signed_area(p)).sum();
             let count = m.as_slice().iter().filter(|&&v| v == MASK_SET).count();
             assert_eq!(total, count as f64);
+        }
+    }
+
+    /// The run-based corner grid against the per-pixel definition (each border of a set
+    /// pixel, with values other than `MASK_SET` counting as unset), and the word-wise scan
+    /// against a plain one.
+    #[test]
+    fn boundary_edges_match_the_per_pixel_definition() {
+        let mut state = 99u64;
+        for (w, h) in [(23, 17), (1, 9), (9, 1), (64, 3)] {
+            let m = Mask::from_fn(ImageSize::new(w, h), |_, _| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                [MASK_SET, 0, 0, 7][(state >> 33) as usize % 4]
+            });
+            let set = |x: i64, y: i64| {
+                x >= 0 && y >= 0 && x < w as i64 && y < h as i64 && m.get(x as usize, y as usize) == MASK_SET
+            };
+            let vw = w + 1;
+            let mut expected = vec![0u8; vw * (h + 1)];
+            let mut count = 0;
+            for y in 0..h as i64 {
+                for x in 0..w as i64 {
+                    if !set(x, y) {
+                        continue;
+                    }
+                    for (neighbour, (vx, vy), dir) in [
+                        ((x, y - 1), (x, y), 0),
+                        ((x + 1, y), (x + 1, y), 1),
+                        ((x, y + 1), (x + 1, y + 1), 2),
+                        ((x - 1, y), (x, y + 1), 3),
+                    ] {
+                        if !set(neighbour.0, neighbour.1) {
+                            expected[vy as usize * vw + vx as usize] |= 1 << dir;
+                            count += 1;
+                        }
+                    }
+                }
+            }
+            assert_eq!(boundary_edges(&m), (expected.clone(), count), "{w}x{h}");
+            for from in 0..=expected.len() {
+                let plain = expected[from..]
+                    .iter()
+                    .position(|&b| b != 0)
+                    .map_or(expected.len(), |n| from + n);
+                assert_eq!(first_nonzero_from(&expected, from), plain);
+            }
         }
     }
 
