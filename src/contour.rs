@@ -150,7 +150,7 @@ fn boundary_edges(mask: &Mask) -> (Vec<u8>, usize) {
 /// bytes at a time: the corner grid is mostly zero.
 fn first_nonzero_from(bytes: &[u8], from: usize) -> usize {
     let mut i = from;
-    while i % 8 != 0 && i < bytes.len() {
+    while !i.is_multiple_of(8) && i < bytes.len() {
         if bytes[i] != 0 {
             return i;
         }
