@@ -40,32 +40,11 @@ use occmask::pipeline::ProcessorConfig;
 use occmask::scenario_eval::{evaluate, EvalMode, RenderedSequence, ScenarioScore};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 use serde::Serialize;
-use serde_json::Value;
-
-/// Merges `patch` into `base` field by field (objects recursively; anything else replaces).
-fn merge(base: &mut Value, patch: Value) {
-    match (base, patch) {
-        (Value::Object(base), Value::Object(patch)) => {
-            for (key, value) in patch {
-                match base.get_mut(&key) {
-                    Some(slot) => merge(slot, value),
-                    None => {
-                        base.insert(key, value);
-                    }
-                }
-            }
-        }
-        (slot, value) => *slot = value,
-    }
-}
 
 /// The default config with the JSON file's fields merged in.
 fn load_config(path: &PathBuf) -> ProcessorConfig {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let patch: Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut value = serde_json::to_value(ProcessorConfig::default()).unwrap();
-    merge(&mut value, patch);
-    let config: ProcessorConfig = serde_json::from_value(value)
+    let config = ProcessorConfig::from_json(&text)
         .unwrap_or_else(|e| panic!("{}: not a configuration: {e}", path.display()));
     config.validate().unwrap();
     config

@@ -127,7 +127,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read --config {}", path.display()))?;
-            serde_json::from_str::<ProcessorConfig>(&text).with_context(|| {
+            ProcessorConfig::from_json(&text).with_context(|| {
                 format!(
                     "--config {}: not a valid configuration (`occmask process --print-config` \
                      prints every field with its default)",

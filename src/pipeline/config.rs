@@ -230,6 +230,23 @@ impl Default for ProcessorConfig {
 }
 
 impl ProcessorConfig {
+    /// A configuration from JSON holding any subset of the fields [`Self::default`] serialises
+    /// to (what `occmask process --print-config` prints), at any depth: every field the JSON
+    /// leaves out keeps its default in its own place. (Deserialising the struct directly would
+    /// fill a partly given nested object from its type's default instead: a partial
+    /// `offline.refinement_dvo` would lose the refinement's weights and motion prior, a partial
+    /// `dvo` the closed loop's.) Unknown fields are an error; a value of another shape (a
+    /// `null`, another enum variant) replaces the default whole. Not validated.
+    ///
+    /// # Errors
+    /// Invalid JSON, an unknown field, or a value of the wrong type.
+    pub fn from_json(text: &str) -> serde_json::Result<Self> {
+        let patch: serde_json::Value = serde_json::from_str(text)?;
+        let mut value = serde_json::to_value(Self::default())?;
+        overlay(&mut value, patch);
+        serde_json::from_value(value)
+    }
+
     /// Checks the DVO, detector, failure-policy and completion parameters.
     ///
     /// # Errors
@@ -242,5 +259,82 @@ impl ProcessorConfig {
         }
         self.offline.validate()?;
         self.failure.validate()
+    }
+}
+
+/// `patch` over `base`: an object whose fields all exist in the base object (a struct, or the
+/// same enum variant) field by field, anything else in its place.
+fn overlay(base: &mut serde_json::Value, patch: serde_json::Value) {
+    use serde_json::Value;
+    match (base, patch) {
+        (Value::Object(base), Value::Object(patch)) if patch.keys().all(|k| base.contains_key(k)) => {
+            for (key, value) in patch {
+                if let Some(slot) = base.get_mut(&key) {
+                    overlay(slot, value);
+                }
+            }
+        }
+        (slot, patch) => *slot = patch,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dvo::IntensityThreshold;
+
+    #[test]
+    fn json_with_every_field_gives_the_same_config() {
+        let defaults = ProcessorConfig::default();
+        let text = serde_json::to_string(&defaults).unwrap();
+        assert_eq!(ProcessorConfig::from_json(&text).unwrap(), defaults);
+        assert_eq!(ProcessorConfig::from_json("{}").unwrap(), defaults);
+    }
+
+    /// A field of a nested object changes that field only: the rest keeps the default of its
+    /// place, not of its type (the refinement's DVO is not `DvoConfig::default()`).
+    #[test]
+    fn partial_nested_objects_keep_the_defaults_of_their_place() {
+        let config = ProcessorConfig::from_json(
+            r#"{"offline": {"refinement_dvo": {"depth_weight_gamma": 10.0}}, "dvo": {"levels": 4}}"#,
+        )
+        .unwrap();
+        let mut expected = ProcessorConfig::default();
+        expected.offline.refinement_dvo.depth_weight_gamma = 10.0;
+        expected.dvo.levels = 4;
+        assert_eq!(config, expected);
+        assert_ne!(
+            expected.offline.refinement_dvo,
+            DvoConfig {
+                depth_weight_gamma: 10.0,
+                ..DvoConfig::default()
+            }
+        );
+        assert_ne!(
+            expected.dvo,
+            DvoConfig {
+                levels: 4,
+                ..DvoConfig::default()
+            }
+        );
+    }
+
+    #[test]
+    fn nulls_and_other_variants_replace_the_default_and_unknown_fields_fail() {
+        let config = ProcessorConfig::from_json(
+            r#"{"occlusion": {"slow_evidence": null}, "dvo": {"k_intensity": "release_schedule"}}"#,
+        )
+        .unwrap();
+        assert_eq!(config.occlusion.slow_evidence, None);
+        assert_eq!(config.dvo.k_intensity, IntensityThreshold::ReleaseSchedule);
+        let config = ProcessorConfig::from_json(r#"{"dvo": {"k_intensity": {"constant": 0.25}}}"#).unwrap();
+        assert_eq!(config.dvo.k_intensity, IntensityThreshold::Constant(0.25));
+        for bad in [
+            r#"{"dvo": {"max_iterations": 3}}"#,
+            r#"{"offline": {"lookahead": 3}}"#,
+            r#"{"dvo": {"levels": "five"}}"#,
+        ] {
+            assert!(ProcessorConfig::from_json(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -318,3 +318,59 @@ fn camera_from_marker_moves_external_poses_to_the_camera() {
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
 }
+
+/// `--config` with part of a nested object changes those fields only: the rest of the offline
+/// refinement's DVO keeps the refinement's defaults (its weights and motion prior), as the
+/// `processor_config` metadata of the output shows; an unknown field is refused by name.
+#[test]
+fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
+    use occmask::mcap_io::annotate::{METADATA_PROCESS, METADATA_PROCESSOR_CONFIG};
+    use occmask::pipeline::ProcessorConfig;
+    let dir = tempfile::tempdir().unwrap();
+    let input = fixture(dir.path(), "in.mcap", Flavor::Protobuf);
+    let config = dir.path().join("partial.json");
+    std::fs::write(
+        &config,
+        r#"{"offline": {"refinement_dvo": {"max_iterations_per_level": 7}}}"#,
+    )
+    .unwrap();
+    let output = dir.path().join("out.mcap");
+    let out = occmask(&[
+        "process".as_ref(),
+        input.as_os_str(),
+        "-o".as_ref(),
+        output.as_os_str(),
+        "-q".as_ref(),
+        "--config".as_ref(),
+        config.as_os_str(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let written = occmask::McapInput::open(&output).unwrap();
+    let process = crate::common::recording::metadata(&written)
+        .into_iter()
+        .find(|m| m.name == METADATA_PROCESS)
+        .unwrap();
+    let recorded: ProcessorConfig =
+        serde_json::from_str(&process.metadata[METADATA_PROCESSOR_CONFIG]).unwrap();
+    let mut expected = ProcessorConfig::default();
+    expected.offline.refinement_dvo.max_iterations_per_level = 7;
+    assert_eq!(recorded, expected);
+
+    std::fs::write(
+        &config,
+        r#"{"offline": {"refinement_dvo": {"max_iterations": 7}}}"#,
+    )
+    .unwrap();
+    let out = occmask(&[
+        "process".as_ref(),
+        input.as_os_str(),
+        "-o".as_ref(),
+        dir.path().join("bad.mcap").as_os_str(),
+        "-q".as_ref(),
+        "--config".as_ref(),
+        config.as_os_str(),
+    ]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("max_iterations"), "{}", stderr(&out));
+    assert!(!dir.path().join("bad.mcap").exists());
+}
