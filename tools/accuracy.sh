@@ -225,7 +225,7 @@ print("| DVO alone, RPE per consecutive pair (`dvo_tum`) | RMSE %.2f mm, %.3f°;
       % (rms(t), rms(a), max(t), max(a), len(t)))
 PY
   sed -n 's/.*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %.*motion rejected at \(.*\)/| detector, ground-truth poses: false positives per frame after 5 frames (`detector_accuracy real`) | mean \1 %, max \2 %, \3 frames above 1 %; motion check rejected frames \4 |/p' "$WORK/real.txt"
-  sed -n 's/.*(DVO closed loop).*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %; \(.*\)/| detector, DVO closed loop: false positives (`detector_accuracy real-dvo`) | mean \1 %, max \2 %, \3 frames above 1 %; \4 |/p' "$WORK/real_dvo.txt"
+  sed -n 's/.*(DVO closed loop, \([a-z]*\)).*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %; \(.*\)/| detector, DVO closed loop, \1: false positives (`detector_accuracy real-dvo`) | mean \2 %, max \3 %, \4 frames above 1 %; \5 |/p' "$WORK/real_dvo.txt"
   $BIN eval "$WORK/tum.out.mcap" --json | python3 -c '
 import json, sys
 o = json.load(sys.stdin)["odometry"]
@@ -270,9 +270,19 @@ section_redkitchen_300() {
   echo "| poses | false positives per frame after 5 frames | other |"
   echo "|---|---|---|"
   sed -n 's/.*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %.*motion rejected at \(.*\)/| KinectFusion (ground truth) | mean \1 %, max \2 %, \3 frames above 1 % | motion check rejected frames \4 |/p' "$WORK/k_real.txt"
-  local rpe
-  rpe=$(sed -n 's/^DVO RPE Δ=1 vs ground truth: \([0-9.]*\) m, \([0-9.]*\)° .*/\1 m, \2°/p' "$WORK/k_dvo.txt")
-  sed -n "s/.*(DVO closed loop).*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %; \(.*\)/| DVO closed loop | mean \1 %, max \2 %, \3 frames above 1 % | RPE Δ=1 $rpe; \4 |/p" "$WORK/k_dvo.txt"
+  sed -n 's/.*(DVO closed loop, \([a-z]*\)).*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %; \(.*\)/| DVO closed loop, \1 | mean \2 %, max \3 %, \4 frames above 1 % | \5 |/p' "$WORK/k_dvo.txt"
+  echo
+  echo "The offline mode flags more of this static kitchen than the causal one. Its refinement pass"
+  echo "runs DVO with the paper's weights (photometric term, depth term γ = 0.001), which is what holds"
+  echo "the camera on Bonn's people, but here colour is not registered to depth and the photometric"
+  echo "term is misled at every edge. With the depth term weighted in the refinement"
+  echo "(\`--config tools/detector_configs/depth_weighted_refinement.json\`: γ = 10, k_depth = 0.05 m)"
+  echo "the offline closed loop measured mean 0.415 %, max 1.647 %, 33 frames above 1 % (without the"
+  echo "slow-change evidence: mean 0.156 %, 5 frames above 1 %), at the price of Bonn's ATE 0.0533 m"
+  echo "instead of 0.0438 m. The figure moves with DVO's small errors (γ = 5: mean 0.864 %; γ = 20:"
+  echo "0.597 %; the closed loop's own weights, γ = 30: 0.593 % and Bonn 0.0663 m), so the default"
+  echo "stays with what measures best on registered recordings (TUM, Bonn); the preset is for"
+  echo "recordings whose colour and depth do not line up."
   echo
 }
 
