@@ -328,22 +328,26 @@ fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
     use occmask::pipeline::ProcessorConfig;
     let dir = tempfile::tempdir().unwrap();
     let input = fixture(dir.path(), "in.mcap", Flavor::Protobuf);
-    let config = dir.path().join("partial.json");
-    std::fs::write(
-        &config,
+    let config = dir.path().join("config.json");
+    // `process` with `json` as its --config, into `name`.
+    let process_with = |json: &str, name: &str| {
+        std::fs::write(&config, json).unwrap();
+        let output = dir.path().join(name);
+        let out = occmask(&[
+            "process".as_ref(),
+            input.as_os_str(),
+            "-o".as_ref(),
+            output.as_os_str(),
+            "-q".as_ref(),
+            "--config".as_ref(),
+            config.as_os_str(),
+        ]);
+        (out, output)
+    };
+    let (out, output) = process_with(
         r#"{"offline": {"refinement_dvo": {"max_iterations_per_level": 7}}}"#,
-    )
-    .unwrap();
-    let output = dir.path().join("out.mcap");
-    let out = occmask(&[
-        "process".as_ref(),
-        input.as_os_str(),
-        "-o".as_ref(),
-        output.as_os_str(),
-        "-q".as_ref(),
-        "--config".as_ref(),
-        config.as_os_str(),
-    ]);
+        "out.mcap",
+    );
     assert!(out.status.success(), "{}", stderr(&out));
     let written = occmask::McapInput::open(&output).unwrap();
     let process = crate::common::recording::metadata(&written)
@@ -356,21 +360,11 @@ fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
     expected.offline.refinement_dvo.max_iterations_per_level = 7;
     assert_eq!(recorded, expected);
 
-    std::fs::write(
-        &config,
+    let (out, output) = process_with(
         r#"{"offline": {"refinement_dvo": {"max_iterations": 7}}}"#,
-    )
-    .unwrap();
-    let out = occmask(&[
-        "process".as_ref(),
-        input.as_os_str(),
-        "-o".as_ref(),
-        dir.path().join("bad.mcap").as_os_str(),
-        "-q".as_ref(),
-        "--config".as_ref(),
-        config.as_os_str(),
-    ]);
+        "bad.mcap",
+    );
     assert!(!out.status.success());
     assert!(stderr(&out).contains("max_iterations"), "{}", stderr(&out));
-    assert!(!dir.path().join("bad.mcap").exists());
+    assert!(!output.exists());
 }
