@@ -624,27 +624,48 @@ impl DvoTracker {
         ignore_in_reference: Option<&Mask>,
         initial_current_from_reference: Option<&Isometry3<f64>>,
     ) -> Result<Option<DvoEstimate>> {
-        if let Some(m) = ignore_in_reference {
-            if m.size() != self.reference.size() {
-                return Err(Error::SizeMismatch {
-                    what: "ignore mask vs frame".into(),
-                    expected: self.reference.size(),
-                    found: m.size(),
-                });
-            }
-        }
+        self.track_with(gray, depth_m, || Ok(ignore_in_reference), initial_current_from_reference)
+    }
+
+    /// [`Self::track`] with the ignore mask made by `ignore_in_reference`, which runs beside
+    /// the new frame's pyramid (on another thread of the pool when one is free) and only when
+    /// there is a reference frame: a caller whose mask takes work to make (the closed loop's
+    /// completion of the detector's mask) takes it off the serial path.
+    ///
+    /// # Errors
+    /// As [`Self::track`], and whatever `ignore_in_reference` returns.
+    pub fn track_with<'m>(
+        &mut self,
+        gray: &GrayF32,
+        depth_m: &DepthMeters,
+        ignore_in_reference: impl FnOnce() -> Result<Option<&'m Mask>> + Send,
+        initial_current_from_reference: Option<&Isometry3<f64>>,
+    ) -> Result<Option<DvoEstimate>> {
         if !self.has_reference {
             self.current.build(gray, depth_m)?;
             std::mem::swap(&mut self.reference, &mut self.current);
             self.has_reference = true;
             return Ok(None);
         }
-        // The new frame's pyramid and the reference's point lists are independent: build them
-        // side by side (the point lists are a serial pass; the pyramid is row-parallel).
+        // The new frame's pyramid and the reference's ignore mask and point lists are
+        // independent: build them side by side (the mask and the point lists are serial
+        // passes; the pyramid is row-parallel).
         let (current, estimator, reference) = (&mut self.current, &mut self.estimator, &self.reference);
         let (built, prepared) = rayon::join(
             || current.build(gray, depth_m),
-            || estimator.prepare_reference(reference, ignore_in_reference),
+            || {
+                let ignore = ignore_in_reference()?;
+                if let Some(m) = ignore {
+                    if m.size() != reference.size() {
+                        return Err(Error::SizeMismatch {
+                            what: "ignore mask vs frame".into(),
+                            expected: reference.size(),
+                            found: m.size(),
+                        });
+                    }
+                }
+                estimator.prepare_reference(reference, ignore)
+            },
         );
         built?;
         prepared?;

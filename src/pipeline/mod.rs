@@ -436,19 +436,29 @@ impl Processor {
                 // DVO's ignore mask must live on its reference frame: the detector's latest
                 // mask is that frame's only when the detector saw the same frame last.
                 let mask_on_reference = self.detector.frames_processed() > 0 && self.dvo_skipped == 0;
-                let ignore = if *closed_loop && mask_on_reference {
-                    if let Some(extra) = frame.ignore_in_previous {
-                        check_size("ignore_in_previous", extra.size(), size)?;
-                    }
-                    Some(self.ignore.build(
-                        self.detector.odometry_mask(),
-                        frame.ignore_in_previous,
-                        self.detector.compensated_depth_m(),
-                    )?)
-                } else {
-                    None
-                };
-                let estimate = tracker.track(frame.gray, frame.depth_m, ignore, None)?;
+                let use_mask = *closed_loop && mask_on_reference;
+                let (ignore, detector) = (&mut self.ignore, &self.detector);
+                // The completion runs beside the new frame's pyramid.
+                let estimate = tracker.track_with(
+                    frame.gray,
+                    frame.depth_m,
+                    move || {
+                        if !use_mask {
+                            return Ok(None);
+                        }
+                        if let Some(extra) = frame.ignore_in_previous {
+                            check_size("ignore_in_previous", extra.size(), size)?;
+                        }
+                        ignore
+                            .build(
+                                detector.odometry_mask(),
+                                frame.ignore_in_previous,
+                                detector.compensated_depth_m(),
+                            )
+                            .map(Some)
+                    },
+                    None,
+                )?;
                 match estimate {
                     None => {
                         stats.outcome = PoseOutcome::FirstFrame;
