@@ -32,7 +32,7 @@
 //! Frames are emitted in order, a block's worth spread over the pushes until the next backward
 //! pass, so results lag the input by up to `block_frames + lookahead_frames` frames (plus
 //! `hysteresis_frames`), and that many frames are buffered (gray as u16, depth as f32, two masks:
-//! 2.4 MB per 640×480 frame; a held frame keeps its three masks, A and its candidates: 2.1 MB and
+//! 2.4 MB per 640×480 frame; a held frame keeps four masks, A and its candidates: 2.4 MB and
 //! 8 bytes per candidate).
 //! Buffers are recycled: after the first block nothing is allocated per frame.
 
