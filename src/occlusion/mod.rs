@@ -222,6 +222,8 @@ impl OcclusionDetector {
                 odometry_mask: Image::filled(size, 0),
                 min_pixels: scaled_pixels(slow.min_object_pixels_vga, size),
                 scratch: SlowScratch::new(size.area()),
+                previous_from_current: Isometry3::identity(),
+                applied: None,
             }),
             stats: OcclusionStats::default(),
             motion_check_rays: (
@@ -313,6 +315,34 @@ impl OcclusionDetector {
     /// the slow-change evidence it is [`Self::mask`].
     pub fn odometry_mask(&self) -> &Mask {
         self.slow.as_ref().map_or(&self.mask, |slow| &slow.odometry_mask)
+    }
+
+    /// Appends to `out` the pixels of the latest frame whose slow-change evidence exceeds
+    /// `fraction` of its threshold (W minus the motion error's share > `fraction`·α·Z), with
+    /// their compensated depth (m), in pixel order; none when the evidence is off. `row` is
+    /// scratch (one image row).
+    pub fn slow_candidates(&self, fraction: f32, row: &mut Vec<u8>, out: &mut Vec<(u32, f32)>) {
+        let (Some(state), Some(config)) = (&self.slow, &self.config.slow_evidence) else {
+            return;
+        };
+        if self.frames < 2 {
+            return;
+        }
+        slow::low_evidence(
+            &SlowFrame {
+                config,
+                intrinsics: &self.intrinsics,
+                rays: &self.rays,
+                previous_from_current: &state.previous_from_current,
+                depth_m: &self.compensated_m,
+                w_m: &state.w_m,
+                previous_mask: &self.mask,
+            },
+            state.applied,
+            fraction * config.alpha,
+            row,
+            out,
+        );
     }
 
     /// The slow-change evidence W of the latest frame (m), when it is on.
@@ -506,6 +536,8 @@ impl OcclusionDetector {
                     &mut state.evidence,
                 );
                 self.stats.slow_motion_correction = counts.correction;
+                state.previous_from_current = previous_from_current;
+                state.applied = counts.applied;
                 counts.bounds
             }
             _ => None,
@@ -611,6 +643,10 @@ struct SlowState {
     /// The evidence's component threshold at this image size.
     min_pixels: usize,
     scratch: SlowScratch,
+    /// The latest frame's motion and the motion-error share applied to its W (for
+    /// [`OcclusionDetector::slow_candidates`]).
+    previous_from_current: Isometry3<f64>,
+    applied: Option<([f32; 6], f32)>,
 }
 
 /// The motion check's verdict ([`OcclusionConfig::motion_check_margin`]).

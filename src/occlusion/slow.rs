@@ -214,6 +214,9 @@ pub(super) struct SlowCounts {
     pub correction: Option<[f64; 6]>,
     /// Bounding box of the evidence set {W > α·Z}.
     pub bounds: Option<PixelBounds>,
+    /// The share of W removed per pixel: ξ and its largest share over the fit's samples
+    /// (relative to Z), when one was applied.
+    pub applied: Option<([f32; 6], f32)>,
 }
 
 /// Scratch of the fit (allocated once).
@@ -519,5 +522,55 @@ pub(super) fn update(frame: &SlowFrame<'_>, scratch: &mut SlowScratch, evidence:
     SlowCounts {
         correction: xi.map(|(x, _)| [x[0], x[1], x[2], x[3], x[4], x[5]]),
         bounds,
+        applied: correction,
+    }
+}
+
+/// The pixels where W minus the applied share of the motion error exceeds `alpha`·Z (the
+/// same test as the evidence's, at another α), appended to `out` with their depth Z (m), in
+/// pixel order. `row` is scratch of the image's width.
+pub(super) fn low_evidence(
+    frame: &SlowFrame<'_>,
+    applied: Option<([f32; 6], f32)>,
+    alpha: f32,
+    row: &mut Vec<u8>,
+    out: &mut Vec<(u32, f32)>,
+) {
+    let (width, height) = (frame.depth_m.width(), frame.depth_m.height());
+    let model = PixelModel::new(frame.previous_from_current, frame.intrinsics);
+    let pre_alpha = alpha - applied.map_or(0.0, |(_, largest)| SHARE_MARGIN * largest);
+    let simd = Simd::detect();
+    let z = frame.depth_m.as_slice();
+    row.clear();
+    row.resize(width, 0);
+    for (y, w_row) in frame.w_m.as_slice().chunks_exact(width).enumerate() {
+        let z_row = &z[y * width..(y + 1) * width];
+        for ((e, &w), &z) in row.iter_mut().zip(w_row).zip(z_row) {
+            *e = u8::from(w > pre_alpha * z);
+        }
+        let Some(first) = super::components::position_nonzero_u8(row) else {
+            continue;
+        };
+        let last = row.iter().rposition(|&e| e != 0).unwrap_or(first);
+        if let Some((xi, _)) = &applied {
+            let span = first.saturating_sub(1)..(last + 2).min(width);
+            let rows = |r: usize| &z[r * width..(r + 1) * width][span.clone()];
+            corrected_evidence_row(
+                simd,
+                &model,
+                xi,
+                &frame.rays.ray_x[span.clone()],
+                frame.rays.ray_y[y],
+                (rows(y.saturating_sub(1)), rows(y), rows((y + 1).min(height - 1))),
+                alpha,
+                &w_row[span.clone()],
+                &mut row[span.clone()],
+            );
+        }
+        for x in first..=last {
+            if row[x] != 0 && z_row[x] > 0.0 && w_row[x] > pre_alpha * z_row[x] {
+                out.push(((y * width + x) as u32, z_row[x]));
+            }
+        }
     }
 }
