@@ -624,7 +624,12 @@ impl DvoTracker {
         ignore_in_reference: Option<&Mask>,
         initial_current_from_reference: Option<&Isometry3<f64>>,
     ) -> Result<Option<DvoEstimate>> {
-        self.track_with(gray, depth_m, || Ok(ignore_in_reference), initial_current_from_reference)
+        self.track_with(
+            gray,
+            depth_m,
+            || Ok(ignore_in_reference),
+            initial_current_from_reference,
+        )
     }
 
     /// [`Self::track`] with the ignore mask made by `ignore_in_reference`, which runs beside
