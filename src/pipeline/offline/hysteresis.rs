@@ -312,13 +312,7 @@ mod tests {
             },
             &mask,
         );
-        let mut keep = |out: FrameOutput<'_>| {
-            let marked = (0..SIZE.area())
-                .filter(|&i| out.mask.as_slice()[i] != 0)
-                .collect();
-            emitted.push((out.index, marked));
-            Ok(())
-        };
+        let mut keep = |out: FrameOutput<'_>| record(&out, emitted);
         hysteresis
             .settle(
                 |fraction, _, out| {
@@ -329,6 +323,15 @@ mod tests {
                 &mut keep,
             )
             .expect("emit");
+    }
+
+    /// Keeps an emitted frame's index and marked pixels.
+    fn record(out: &FrameOutput<'_>, emitted: &mut Vec<(u64, Vec<usize>)>) -> Result<()> {
+        let marked = (0..SIZE.area())
+            .filter(|&i| out.mask.as_slice()[i] != 0)
+            .collect();
+        emitted.push((out.index, marked));
+        Ok(())
     }
 
     fn hysteresis(frames: usize) -> Hysteresis {
@@ -356,13 +359,7 @@ mod tests {
         push(&mut h, 2, &[], &with_far, 0.07, false, &mut emitted);
         push(&mut h, 3, &object, &with_far, 0.09, false, &mut emitted);
         assert!(emitted.is_empty(), "held back");
-        let mut keep = |out: FrameOutput<'_>| {
-            let marked = (0..SIZE.area())
-                .filter(|&i| out.mask.as_slice()[i] != 0)
-                .collect();
-            emitted.push((out.index, marked));
-            Ok(())
-        };
+        let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
         h.flush(&mut keep).expect("emit");
         assert_eq!(h.len(), 0);
         let marked: Vec<_> = emitted.iter().map(|(i, m)| (*i, m.clone())).collect();
@@ -391,15 +388,7 @@ mod tests {
         let mut emitted = Vec::new();
         push(&mut h, 0, &[], &object, 0.05, false, &mut emitted);
         push(&mut h, 1, &object, &object, 0.05, true, &mut emitted);
-        let mut keep = |out: FrameOutput<'_>| {
-            emitted.push((
-                out.index,
-                (0..SIZE.area())
-                    .filter(|&i| out.mask.as_slice()[i] != 0)
-                    .collect(),
-            ));
-            Ok(())
-        };
+        let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
         h.flush(&mut keep).expect("emit");
         assert!(emitted[0].1.is_empty(), "marked across a restart");
     }
