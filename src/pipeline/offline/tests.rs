@@ -208,3 +208,52 @@ fn emits_a_block_over_the_pushes_until_the_next_backward_pass() {
     processor.finish(&mut |_| Ok(())).expect("finish");
     assert_eq!(processor.pending_frames(), 0);
 }
+
+/// The refinement's DVO keeps at least 240 rows: VGA tracks at 320×240 (level 1, as configured),
+/// 320×240 at full resolution instead of 160×120; with the floor off the configured level holds.
+#[test]
+fn refinement_dvo_keeps_its_resolution_on_small_images() {
+    let offline = OfflineConfig::default();
+    assert_eq!(offline.refinement_dvo.finest_level, 1);
+    assert_eq!(refinement_dvo(&offline, ImageSize::new(640, 480)).finest_level, 1);
+    assert_eq!(refinement_dvo(&offline, ImageSize::new(320, 240)).finest_level, 0);
+    assert_eq!(refinement_dvo(&offline, ImageSize::new(160, 120)).finest_level, 0);
+    let as_configured = OfflineConfig {
+        refinement_min_side_px: 0,
+        ..offline
+    };
+    assert_eq!(
+        refinement_dvo(&as_configured, ImageSize::new(320, 240)).finest_level,
+        1
+    );
+}
+
+/// The first pass's DVO keeps at least 120 rows: VGA tracks at 160×120 (level 2, as
+/// configured), 320×240 at 160×120 too (level 1) instead of 80×60; never finer than the closed
+/// loop's own finest level; with the floor off the configured level holds.
+#[test]
+fn first_pass_dvo_keeps_its_resolution_on_small_images() {
+    let offline = OfflineConfig::default();
+    let dvo = ProcessorConfig::default().dvo;
+    assert_eq!((offline.first_pass_finest_level, dvo.finest_level), (2, 1));
+    assert_eq!(
+        first_pass_finest_level(&offline, &dvo, ImageSize::new(640, 480)),
+        2
+    );
+    assert_eq!(
+        first_pass_finest_level(&offline, &dvo, ImageSize::new(320, 240)),
+        1
+    );
+    assert_eq!(
+        first_pass_finest_level(&offline, &dvo, ImageSize::new(160, 120)),
+        1
+    );
+    let as_configured = OfflineConfig {
+        first_pass_min_side_px: 0,
+        ..offline
+    };
+    assert_eq!(
+        first_pass_finest_level(&as_configured, &dvo, ImageSize::new(320, 240)),
+        2
+    );
+}
