@@ -16,6 +16,10 @@
 //! [--modes offline,causal] [--frames]`
 //! prints each mode's false positives and DVO's RPE against the ground truth; `--config` overlays
 //! a partial JSON config on the defaults (as the CLI's), `--frames` prints every frame's fraction.
+//!
+//! The offline mode's colour/depth registration score (docs/method.md D18) of every third of the
+//! first 90 frames of each folder:
+//! `cargo run --release --example detector_accuracy -- registration <dir>...`
 
 // A diagnosis tool: a failing setup is a bug worth a panic.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
