@@ -12,8 +12,14 @@
 //! 7-Scenes frames must not be copied into it).
 //!
 //! The same sequences with the DVO closed loop, offline (the default) and causal:
-//! `cargo run --release --example detector_accuracy -- real-dvo <dir> <fx> <fy> <cx> <cy>`
-//! prints each mode's false positives and DVO's RPE against the ground truth.
+//! `cargo run --release --example detector_accuracy -- real-dvo <dir> <fx> <fy> <cx> <cy> [--config FILE]
+//! [--modes offline,causal] [--frames]`
+//! prints each mode's false positives and DVO's RPE against the ground truth; `--config` overlays
+//! a partial JSON config on the defaults (as the CLI's), `--frames` prints every frame's fraction.
+//!
+//! The offline mode's colour/depth registration score (docs/method.md D18) of every third of the
+//! first 90 frames of each folder:
+//! `cargo run --release --example detector_accuracy -- registration <dir>...`
 
 // A diagnosis tool: a failing setup is a bug worth a panic.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -31,6 +37,7 @@ use occmask::image_buf::{DepthMeters, Image, ImageSize, Mask};
 use occmask::metrics::{rpe, FrameCounts, SegmentationTally};
 use occmask::occlusion::consistency::depth_consistency;
 use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector, OcclusionStats};
+use occmask::pipeline::offline::registration::RegistrationProfile;
 use occmask::pipeline::offline::OfflineProcessor;
 use occmask::pipeline::{FrameInput, FrameOutput, PoseSource, ProcessingMode, Processor, ProcessorConfig};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
@@ -374,16 +381,19 @@ fn probe(dir: &Path, intrinsics: PinholeIntrinsics, first: usize, last: usize) {
 
 /// The DVO closed loop on a real static sequence (gray from the nearest colour image): the
 /// false-positive fraction per frame after the warm-up.
-fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
+fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics, base: &ProcessorConfig, modes: &str, per_frame: bool) {
     let sequence = TumSequence::load(dir).unwrap();
     for (mode, label) in [
         (ProcessingMode::Offline, "offline"),
         (ProcessingMode::Causal, "causal"),
     ] {
+        if !modes.split(',').any(|m| m == label) {
+            continue;
+        }
         let config = ProcessorConfig {
             occlusion: detector_config(),
             mode,
-            ..ProcessorConfig::default()
+            ..*base
         };
         let mut fractions = Vec::new();
         let (mut not_converged, mut resets, mut rejected) = (0, 0, 0);
@@ -411,6 +421,11 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
                     processor.push(&input(&frame), &mut keep).unwrap();
                 }
                 processor.finish(&mut keep).unwrap();
+                println!(
+                    "colour registered: {:?} (score {:?})",
+                    processor.colour_registered(),
+                    processor.registration_score()
+                );
             }
             ProcessingMode::Causal => {
                 let mut processor = Processor::new(SIZE, intrinsics, config).unwrap();
@@ -420,6 +435,11 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics) {
             }
         }
         let rpe_1 = rpe(&estimated, &reference, 1).unwrap();
+        if per_frame {
+            for (i, f) in fractions.iter().enumerate() {
+                println!("{label} frame {i:4} FP {:.3} %", 100.0 * f);
+            }
+        }
         let (mean, worst, above) = false_positives_after_warm_up(&fractions);
         println!(
             "{} (DVO closed loop, {label}): {} frames, FP after warm-up: mean {:.3} %, max {:.3} %, {above} frames above 1 %; \
@@ -481,7 +501,38 @@ fn main() {
         }
         Some("real-dvo") => {
             let k: Vec<f64> = args[2..6].iter().map(|s| s.parse().unwrap()).collect();
-            real_dvo(Path::new(&args[1]), PinholeIntrinsics::new(k[0], k[1], k[2], k[3]));
+            let option = |name: &str| args.iter().position(|a| a == name).map(|i| args[i + 1].clone());
+            let base = option("--config").map_or_else(ProcessorConfig::default, |file| {
+                ProcessorConfig::from_json(&std::fs::read_to_string(file).unwrap()).unwrap()
+            });
+            let modes = option("--modes").unwrap_or_else(|| "offline,causal".into());
+            real_dvo(
+                Path::new(&args[1]),
+                PinholeIntrinsics::new(k[0], k[1], k[2], k[3]),
+                &base,
+                &modes,
+                frames,
+            );
+        }
+        Some("registration") => {
+            // The colour/depth registration profile of every 25th frame of each folder.
+            for dir in &args[1..] {
+                let sequence = TumSequence::load(Path::new(dir)).unwrap();
+                let pairs = sequence.depth_with_nearest_color();
+                for pair in pairs.iter().take(90).step_by(3) {
+                    let frame = sequence.decode(pair).unwrap();
+                    match RegistrationProfile::measure(&frame.gray, &frame.depth_m) {
+                        Some(p) => println!(
+                            "{dir} depth {:4}: score {:.3}, {} edge px, profile {:?}",
+                            pair.depth,
+                            p.score(),
+                            p.edge_pixels,
+                            p.gradient.map(|g| (g * 1000.0).round() / 1000.0)
+                        ),
+                        None => println!("{dir} depth {:4}: too few edges", pair.depth),
+                    }
+                }
+            }
         }
         Some("bench-check") => {
             // Time of one motion check (two consistency passes at stride 8) at 640×480.

@@ -53,7 +53,9 @@ use crate::occlusion::{OcclusionConfig, OcclusionDetector};
 use crate::pyramid::{downsample_depth_into, downsample_gray_into, level_size};
 
 mod hysteresis;
+pub mod registration;
 use hysteresis::Hysteresis;
+use registration::RegistrationProfile;
 
 /// Parameters of the offline mode ([`OfflineProcessor`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -92,6 +94,56 @@ pub struct OfflineConfig {
     pub hysteresis_frames: usize,
     /// The hysteresis's low threshold as a fraction of the slow-change evidence's α, in (0, 1].
     pub hysteresis_low_fraction: f32,
+    /// The closed loop's refinement on a recording whose colour is not registered to its depth,
+    /// found from its first frames ([`registration`]). `None`: not checked, every recording is
+    /// refined with [`Self::refinement_dvo`] and [`Self::hysteresis_frames`].
+    pub unregistered_colour: Option<UnregisteredColourConfig>,
+}
+
+/// What the closed loop's refinement pass uses instead on a recording whose colour is not
+/// registered to its depth ([`OfflineConfig::unregistered_colour`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct UnregisteredColourConfig {
+    /// Colour counts as not registered when the median [`registration::RegistrationProfile::score`]
+    /// of the measured frames is below this.
+    pub min_score: f32,
+    /// Frames measured: the first ones with enough depth edges
+    /// ([`registration::MIN_EDGE_PIXELS`]); the decision is taken earlier if the refinement pass
+    /// is due first.
+    pub frames: usize,
+    /// The refinement pass's DVO on such a recording.
+    pub refinement_dvo: DvoConfig,
+    /// [`OfflineConfig::hysteresis_frames`] on such a recording.
+    pub hysteresis_frames: usize,
+}
+
+/// Default [`UnregisteredColourConfig::min_score`]. Measured over the first 90 frames (every
+/// third; medians): TUM fr2_desk 2.6 and the Bonn crowd 2.5 (registered; single frames
+/// 1.6–3.5), 7-Scenes redkitchen 0.87 (not registered; single frames 0.69–1.78; the processor's
+/// median over all 90: 0.90).
+pub const DEFAULT_MIN_REGISTRATION_SCORE: f32 = 1.5;
+/// Default [`UnregisteredColourConfig::frames`]: the frames buffered before the first
+/// refinement at the default block and look-ahead, so the check delays nothing.
+pub const DEFAULT_REGISTRATION_FRAMES: usize = DEFAULT_BLOCK_FRAMES + DEFAULT_LOOKAHEAD_FRAMES;
+/// Default refinement weights on unregistered colour: the depth term weighted (γ 10, k_Z 5 cm).
+pub const UNREGISTERED_DEPTH_WEIGHT_GAMMA: f32 = 10.0;
+/// See [`UNREGISTERED_DEPTH_WEIGHT_GAMMA`].
+pub const UNREGISTERED_K_DEPTH_M: f32 = 0.05;
+
+impl Default for UnregisteredColourConfig {
+    fn default() -> Self {
+        Self {
+            min_score: DEFAULT_MIN_REGISTRATION_SCORE,
+            frames: DEFAULT_REGISTRATION_FRAMES,
+            refinement_dvo: DvoConfig {
+                depth_weight_gamma: UNREGISTERED_DEPTH_WEIGHT_GAMMA,
+                k_depth_m: UNREGISTERED_K_DEPTH_M,
+                ..OfflineConfig::paper_refinement_dvo()
+            },
+            hysteresis_frames: 0,
+        }
+    }
 }
 
 /// Default [`OfflineConfig::block_frames`]: 2 s at 30 Hz.
@@ -145,15 +197,21 @@ impl Default for OfflineConfig {
             hysteresis_frames: DEFAULT_HYSTERESIS_FRAMES,
             hysteresis_low_fraction: DEFAULT_HYSTERESIS_LOW_FRACTION,
             refinement_min_side_px: DEFAULT_REFINEMENT_MIN_SIDE_PX,
-            refinement_dvo: DvoConfig {
-                motion_prior: Some(MotionPriorConfig::default()),
-                ..DvoConfig::paper()
-            },
+            refinement_dvo: Self::paper_refinement_dvo(),
+            unregistered_colour: Some(UnregisteredColourConfig::default()),
         }
     }
 }
 
 impl OfflineConfig {
+    /// The default refinement DVO: the paper's weights with the motion prior.
+    pub fn paper_refinement_dvo() -> DvoConfig {
+        DvoConfig {
+            motion_prior: Some(MotionPriorConfig::default()),
+            ..DvoConfig::paper()
+        }
+    }
+
     /// Checks every field.
     ///
     /// # Errors
@@ -172,6 +230,16 @@ impl OfflineConfig {
                 value: self.hysteresis_low_fraction.to_string(),
                 expected: "a fraction in (0, 1]".into(),
             });
+        }
+        if let Some(unregistered) = &self.unregistered_colour {
+            if !(unregistered.min_score.is_finite() && unregistered.min_score >= 0.0) {
+                return Err(Error::InvalidParameter {
+                    name: "offline.unregistered_colour.min_score",
+                    value: unregistered.min_score.to_string(),
+                    expected: "finite and >= 0".into(),
+                });
+            }
+            unregistered.refinement_dvo.validate()?;
         }
         self.refinement_dvo.validate()
     }
@@ -216,6 +284,22 @@ pub struct OfflineProcessor {
     config: OfflineConfig,
     first: FirstPass,
     later: LaterPasses,
+    /// The colour/depth registration check, until it has decided (closed loop only).
+    registration: Option<RegistrationCheck>,
+    /// Its decision: `Some(false)` once the colour was found not registered.
+    colour_registered: Option<bool>,
+    /// The median score it decided on (`None` without a frame with enough depth edges).
+    registration_score: Option<f32>,
+}
+
+/// The registration scores of the first frames and what replaces the refinement pass if they
+/// find the colour not registered.
+struct RegistrationCheck {
+    config: UnregisteredColourConfig,
+    scores: Vec<f32>,
+    /// The refinement pass's processor config on unregistered colour.
+    refine: ProcessorConfig,
+    intrinsics: PinholeIntrinsics,
 }
 
 /// Pass 1.
@@ -301,7 +385,7 @@ impl OfflineProcessor {
         };
         let refine = match config.pose_source {
             PoseSource::DvoClosedLoop => ProcessorConfig {
-                dvo: refinement_dvo(&offline, size),
+                dvo: refinement_dvo(&offline, offline.refinement_dvo, size),
                 ..config
             },
             // The DVO baseline's poses (camera poses) and external poses are replayed.
@@ -318,6 +402,18 @@ impl OfflineProcessor {
                 camera_from_marker: Some(c),
             } => c.inverse(),
             _ => Isometry3::identity(),
+        };
+        let registration = match (config.pose_source, offline.unregistered_colour) {
+            (PoseSource::DvoClosedLoop, Some(unregistered)) => Some(RegistrationCheck {
+                config: unregistered,
+                scores: Vec::with_capacity(unregistered.frames),
+                refine: ProcessorConfig {
+                    dvo: refinement_dvo(&offline, unregistered.refinement_dvo, size),
+                    ..refine
+                },
+                intrinsics,
+            }),
+            _ => None,
         };
         let refine = Processor::new(size, intrinsics, refine)?;
         // The candidates are the slow-change evidence's: none on images too small for it.
@@ -350,7 +446,67 @@ impl OfflineProcessor {
                 has_previous_seed_mask: false,
                 hysteresis,
             },
+            registration,
+            colour_registered: None,
+            registration_score: None,
         })
+    }
+
+    /// Whether the recording's colour was found registered to its depth (the refinement pass's
+    /// DVO and hysteresis follow; [`OfflineConfig::unregistered_colour`]): `None` before the
+    /// check has decided or where it is off.
+    pub fn colour_registered(&self) -> Option<bool> {
+        self.colour_registered
+    }
+
+    /// The median [`registration::RegistrationProfile::score`] the check decided on (`None`
+    /// before, where it is off, or without a frame with enough depth edges).
+    pub fn registration_score(&self) -> Option<f32> {
+        self.registration_score
+    }
+
+    /// Measures `frame` for the registration check, and decides once it has its frames or the
+    /// refinement pass is due.
+    fn check_registration(&mut self, frame: Option<&FrameInput<'_>>) -> Result<()> {
+        let Some(check) = &mut self.registration else {
+            return Ok(());
+        };
+        if let Some(frame) = frame {
+            if check.scores.len() < check.config.frames {
+                // NaN gray (invalid input) gives no score.
+                let score = RegistrationProfile::measure(frame.gray, frame.depth_m)
+                    .map(|profile| profile.score())
+                    .filter(|score| !score.is_nan());
+                check.scores.extend(score);
+            }
+        }
+        let window = self.config.block_frames + self.config.lookahead_frames;
+        let refinement_due =
+            frame.is_none() || self.later.buffer.len() >= window || !self.later.ready.is_empty();
+        if check.scores.len() < check.config.frames && !refinement_due {
+            return Ok(());
+        }
+        let score = median(&mut check.scores);
+        let registered = score.is_none_or(|score| score >= check.config.min_score);
+        self.registration_score = score;
+        if !registered {
+            let size = self.later.size;
+            self.later.refine = Processor::new(size, check.intrinsics, check.refine)?;
+            let offline = OfflineConfig {
+                hysteresis_frames: check.config.hysteresis_frames,
+                ..self.config
+            };
+            self.later.hysteresis = self
+                .later
+                .refine
+                .detector()
+                .config()
+                .slow_evidence
+                .and_then(|_| Hysteresis::new(&offline, size, check.intrinsics));
+        }
+        self.colour_registered = Some(registered);
+        self.registration = None;
+        Ok(())
     }
 
     /// Frames pushed but not yet emitted.
@@ -371,6 +527,7 @@ impl OfflineProcessor {
         let size = self.later.size;
         check_size("gray image", frame.gray.size(), size)?;
         check_size("depth image", frame.depth_m.size(), size)?;
+        self.check_registration(Some(frame))?;
         let mut buffered = self.later.spare.pop().unwrap_or_else(|| {
             // The detector leaves the evidence out on small images (then the two masks agree).
             Buffered::new(size, self.later.backward.config().slow_evidence.is_some())
@@ -391,6 +548,7 @@ impl OfflineProcessor {
     /// # Errors
     /// As [`Self::push`].
     pub fn finish(&mut self, emit: &mut Emit<'_>) -> Result<()> {
+        self.check_registration(None)?;
         let later = &mut self.later;
         later.refine_ready(later.ready.len(), emit)?;
         while !later.buffer.is_empty() {
@@ -644,16 +802,21 @@ fn short_side(size: ImageSize, level: usize) -> usize {
     s.width.min(s.height)
 }
 
-/// The refinement pass's DVO for images of `size`: [`OfflineConfig::refinement_dvo`] with its
-/// finest level lowered until that level's short side is at least
-/// [`OfflineConfig::refinement_min_side_px`] (or the level is full resolution).
-fn refinement_dvo(offline: &OfflineConfig, size: ImageSize) -> DvoConfig {
-    let dvo = offline.refinement_dvo;
+/// A refinement pass's DVO `dvo` for images of `size`: its finest level lowered until that
+/// level's short side is at least [`OfflineConfig::refinement_min_side_px`] (or the level is
+/// full resolution).
+fn refinement_dvo(offline: &OfflineConfig, dvo: DvoConfig, size: ImageSize) -> DvoConfig {
     let mut finest_level = dvo.finest_level;
     while finest_level > 0 && short_side(size, finest_level) < offline.refinement_min_side_px {
         finest_level -= 1;
     }
     DvoConfig { finest_level, ..dvo }
+}
+
+/// The median of `values` (reordered), `None` for none.
+fn median(values: &mut [f32]) -> Option<f32> {
+    values.sort_by(f32::total_cmp);
+    values.get(values.len() / 2).copied()
 }
 
 /// `requested` halvings of `size`, fewer where the image would get smaller than

@@ -215,15 +215,29 @@ fn emits_a_block_over_the_pushes_until_the_next_backward_pass() {
 fn refinement_dvo_keeps_its_resolution_on_small_images() {
     let offline = OfflineConfig::default();
     assert_eq!(offline.refinement_dvo.finest_level, 1);
-    assert_eq!(refinement_dvo(&offline, ImageSize::new(640, 480)).finest_level, 1);
-    assert_eq!(refinement_dvo(&offline, ImageSize::new(320, 240)).finest_level, 0);
-    assert_eq!(refinement_dvo(&offline, ImageSize::new(160, 120)).finest_level, 0);
+    assert_eq!(
+        refinement_dvo(&offline, offline.refinement_dvo, ImageSize::new(640, 480)).finest_level,
+        1
+    );
+    assert_eq!(
+        refinement_dvo(&offline, offline.refinement_dvo, ImageSize::new(320, 240)).finest_level,
+        0
+    );
+    assert_eq!(
+        refinement_dvo(&offline, offline.refinement_dvo, ImageSize::new(160, 120)).finest_level,
+        0
+    );
     let as_configured = OfflineConfig {
         refinement_min_side_px: 0,
         ..offline
     };
     assert_eq!(
-        refinement_dvo(&as_configured, ImageSize::new(320, 240)).finest_level,
+        refinement_dvo(
+            &as_configured,
+            as_configured.refinement_dvo,
+            ImageSize::new(320, 240)
+        )
+        .finest_level,
         1
     );
 }
@@ -256,4 +270,77 @@ fn first_pass_dvo_keeps_its_resolution_on_small_images() {
         first_pass_finest_level(&as_configured, &dvo, ImageSize::new(320, 240)),
         2
     );
+}
+
+/// The registration check (`OfflineConfig::unregistered_colour`): a wall of 20 px tiles at
+/// 1.5 m and 2 m (a checkerboard in depth, each tile its own gray) with its colour registered
+/// passes; with the gray image moved 6 px right and down (a colour camera beside the depth
+/// camera, not mapped onto it) it fails, and the refinement pass then runs without the temporal
+/// hysteresis. (The synthetic scenarios have too few depth edges to be measured: no score,
+/// registered.)
+#[test]
+fn colour_moved_off_the_depth_is_found_not_registered() {
+    const SHIFT_PX: usize = 6;
+    const TILE_PX: usize = 20;
+    let size = ImageSize::new(320, 240);
+    let intrinsics = PinholeIntrinsics::new(260.0, 260.0, 159.5, 119.5);
+    let frames = 14;
+    let tile = |x: usize, y: usize| (x / TILE_PX, y / TILE_PX);
+    let depth_m = DepthMeters::from_fn(size, |x, y| {
+        let (tx, ty) = tile(x, y);
+        if (tx + ty) % 2 == 0 {
+            1.5
+        } else {
+            2.0
+        }
+    });
+    // A fixed pseudo-random gray per tile, 0.2–0.8.
+    let tile_gray = |x: usize, y: usize| {
+        let (tx, ty) = tile(x, y);
+        0.2 + 0.6 * (((tx * 7 + ty * 13) % 11) as f32 / 10.0)
+    };
+    for (shift, registered) in [(0, true), (SHIFT_PX, false)] {
+        let gray = GrayF32::from_fn(size, |x, y| {
+            tile_gray(x.saturating_sub(shift), y.saturating_sub(shift))
+        });
+        let config = ProcessorConfig {
+            offline: short_blocks(),
+            ..ProcessorConfig::default()
+        };
+        let mut processor = OfflineProcessor::new(size, intrinsics, config).expect("valid config");
+        assert!(processor.later.hysteresis.is_some());
+        let mut keep = |_: FrameOutput<'_>| Ok(());
+        for i in 0..frames {
+            let input = FrameInput {
+                timestamp_ns: i as u64 * 33_000_000,
+                gray: &gray,
+                depth_m: &depth_m,
+                world_from_marker: None,
+                ignore_in_previous: None,
+            };
+            processor.push(&input, &mut keep).expect("push");
+        }
+        processor.finish(&mut keep).expect("finish");
+        let score = processor.registration_score();
+        assert_eq!(
+            processor.colour_registered(),
+            Some(registered),
+            "shift {shift} px: score {score:?}"
+        );
+        assert_eq!(
+            processor.later.hysteresis.is_some(),
+            registered,
+            "shift {shift} px"
+        );
+    }
+    // Off: never checked.
+    let config = ProcessorConfig {
+        offline: OfflineConfig {
+            unregistered_colour: None,
+            ..short_blocks()
+        },
+        ..ProcessorConfig::default()
+    };
+    let processor = OfflineProcessor::new(size, intrinsics, config).expect("valid config");
+    assert!(processor.registration.is_none());
 }
