@@ -60,10 +60,12 @@ pub mod bench_api {
 
 pub use completion::{IgnoreCompletion, IgnoreCompletionConfig};
 pub use config::{
-    DvoConfig, IntensityThreshold, MotionPriorConfig, CLOSED_LOOP_DEPTH_WEIGHT, CLOSED_LOOP_K_DEPTH_M,
-    DEFAULT_LEVELS, DEFAULT_PRIOR_FULL_WEIGHT_IGNORED_FRACTION, DEFAULT_PRIOR_ROTATION_SIGMA_RAD,
-    DEFAULT_PRIOR_TRANSLATION_SIGMA_M, DEFAULT_PRIOR_WEIGHT, LM_LAMBDA_INITIAL, MAX_DVO_LEVELS,
-    MAX_FINAL_COST_FRACTION, MIN_GRADIENT_PER_PX, STEP_TOLERANCE,
+    DvoConfig, IntensityThreshold, KeyframeConfig, MotionPriorConfig, CLOSED_LOOP_DEPTH_WEIGHT,
+    CLOSED_LOOP_K_DEPTH_M, DEFAULT_KEYFRAME_MAX_FRAMES, DEFAULT_KEYFRAME_MAX_MOVING_FRACTION,
+    DEFAULT_KEYFRAME_MAX_ROTATION_RAD, DEFAULT_KEYFRAME_MAX_TRANSLATION_M,
+    DEFAULT_KEYFRAME_MIN_USED_FRACTION, DEFAULT_LEVELS, DEFAULT_PRIOR_FULL_WEIGHT_IGNORED_FRACTION,
+    DEFAULT_PRIOR_ROTATION_SIGMA_RAD, DEFAULT_PRIOR_TRANSLATION_SIGMA_M, DEFAULT_PRIOR_WEIGHT,
+    LM_LAMBDA_INITIAL, MAX_DVO_LEVELS, MAX_FINAL_COST_FRACTION, MIN_GRADIENT_PER_PX, STEP_TOLERANCE,
 };
 
 use nalgebra::Isometry3;
@@ -551,19 +553,33 @@ fn missing_level(level: usize) -> Error {
     }
 }
 
-/// Frame-to-frame DVO over a sequence: keeps the previous frame's pyramid as the reference.
+/// DVO over a sequence: each frame is tracked against a reference frame, the previous one
+/// (frame to frame) or, with [`DvoConfig::keyframe`], a keyframe that is kept while the camera
+/// stays near it, so that the error of each step does not add up.
 ///
 /// The pyramids and scratch are allocated in [`DvoTracker::new`]; [`DvoTracker::track`] builds
-/// the new frame's pyramid once, estimates the motion from the previous frame, then swaps the
-/// two pyramids (no copy). `track` is not free of allocations: it makes a few now and then
-/// (counted in `tests/detector_alloc.rs`).
+/// the new frame's pyramid once and estimates its motion against the reference, whose point
+/// lists are prepared once per reference frame; pyramids change roles by swapping (no copy).
+/// `track` is not free of allocations: it makes a few now and then (counted in
+/// `tests/detector_alloc.rs`).
 #[derive(Debug, Clone)]
 pub struct DvoTracker {
     estimator: DvoEstimator,
+    /// The reference frame (the previous frame, or the keyframe).
     reference: ImagePyramid,
     current: ImagePyramid,
+    /// With keyframes: the previous frame, once it is not the keyframe.
+    previous: Option<ImagePyramid>,
     has_reference: bool,
+    /// The last converged motion from one frame to the next.
     previous_motion: Option<Isometry3<f64>>,
+    /// With keyframes: the previous frame's pose in the keyframe's camera (identity when the
+    /// previous frame is the keyframe), and the frames tracked against the keyframe.
+    previous_from_keyframe: Isometry3<f64>,
+    frames_on_keyframe: usize,
+    /// The reference must be prepared from the previous frame (always frame to frame; with
+    /// keyframes, the previous frame becomes the keyframe).
+    new_reference: bool,
 }
 
 impl DvoTracker {
@@ -577,12 +593,18 @@ impl DvoTracker {
         let config = *estimator.config();
         let reference = ImagePyramid::new(size, intrinsics, config.levels, config.finest_level)?;
         let current = reference.clone();
+        // Frame to frame needs no third pyramid.
+        let previous = config.keyframe.is_some().then(|| reference.clone());
         Ok(Self {
             estimator,
             reference,
             current,
+            previous,
             has_reference: false,
             previous_motion: None,
+            previous_from_keyframe: Isometry3::identity(),
+            frames_on_keyframe: 0,
+            new_reference: true,
         })
     }
 
@@ -594,9 +616,18 @@ impl DvoTracker {
     /// Forgets the last motion, so the next [`Self::track`] has no constant-velocity prediction
     /// (no [`DvoConfig::motion_prior`], no [`DvoConfig::init_from_previous_motion`]): for the
     /// caller to call when that motion was not trusted or the next estimate spans more than
-    /// one frame interval (frames skipped in between).
+    /// one frame interval (frames skipped in between). With keyframes, the last tracked frame
+    /// also becomes the keyframe: its pose relative to the old one is not trusted either.
     pub fn forget_motion(&mut self) {
         self.previous_motion = None;
+        self.new_reference = true;
+    }
+
+    /// With keyframes: the last tracked frame becomes the keyframe for the next one (the caller
+    /// saw something that the old keyframe's ignore mask does not cover). Frame to frame, a
+    /// no-op.
+    pub fn end_keyframe(&mut self) {
+        self.new_reference = true;
     }
 
     /// Forgets the reference frame (the next [`Self::track`] returns `None`) and the motion prior.
@@ -606,12 +637,14 @@ impl DvoTracker {
     }
 
     /// Adds a frame: returns the motion from the previous frame to this one (`None` for the
-    /// first frame after creation or [`Self::reset`]), then keeps this frame as the reference.
+    /// first frame after creation or [`Self::reset`]); this frame is then the next one's
+    /// reference, or with keyframes the previous frame for the next one.
     ///
     /// `ignore_in_reference` (nonzero = ignore) lives on the *previous* frame's pixel grid
     /// (the moving objects detected there); it is dilated per the config. The initial guess
-    /// is `initial_current_from_reference`, else the previous converged motion when
-    /// [`DvoConfig::init_from_previous_motion`] is set, else identity.
+    /// (of the motion from the previous frame) is `initial_current_from_reference`, else the
+    /// previous converged motion when [`DvoConfig::init_from_previous_motion`] is set, else
+    /// identity.
     ///
     /// # Errors
     /// [`Error::SizeMismatch`] when an image or the mask is not the tracker's size (the
@@ -632,13 +665,13 @@ impl DvoTracker {
         )
     }
 
-    /// [`Self::track`] with the ignore mask made by `ignore_in_reference`, which runs beside
-    /// the new frame's pyramid (on another thread of the pool when one is free) and only when
-    /// there is a reference frame: a caller whose mask takes work to make (the closed loop's
-    /// completion of the detector's mask) takes it off the serial path.
+    /// [`Self::track`] with the previous frame's ignore mask made by `ignore_in_reference`,
+    /// which runs beside the new frame's pyramid (the caller's mask work then overlaps it).
+    /// With keyframes, it is called only when the previous frame becomes the keyframe (the
+    /// mask is a keyframe's, kept with it).
     ///
     /// # Errors
-    /// As [`Self::track`], and whatever `ignore_in_reference` returns.
+    /// As [`Self::track`], and what `ignore_in_reference` returns.
     pub fn track_with<'m>(
         &mut self,
         gray: &GrayF32,
@@ -650,42 +683,84 @@ impl DvoTracker {
             self.current.build(gray, depth_m)?;
             std::mem::swap(&mut self.reference, &mut self.current);
             self.has_reference = true;
+            self.new_reference = true;
+            self.frames_on_keyframe = 0;
             return Ok(None);
         }
-        // The new frame's pyramid and the reference's ignore mask and point lists are
-        // independent: build them side by side (the mask and the point lists are serial
-        // passes; the pyramid is row-parallel).
-        let (current, estimator, reference) = (&mut self.current, &mut self.estimator, &self.reference);
-        let (built, prepared) = rayon::join(
-            || current.build(gray, depth_m),
-            || {
-                let ignore = ignore_in_reference()?;
-                if let Some(m) = ignore {
-                    if m.size() != reference.size() {
-                        return Err(Error::SizeMismatch {
-                            what: "ignore mask vs frame".into(),
-                            expected: reference.size(),
-                            found: m.size(),
-                        });
+        let keyframes = self.config().keyframe;
+        if keyframes.is_none() || self.new_reference {
+            // The previous frame is the new reference (with keyframes, it is in `previous`
+            // unless it is the keyframe already).
+            if let Some(previous) = self.previous.as_mut().filter(|_| self.frames_on_keyframe > 0) {
+                std::mem::swap(&mut self.reference, previous);
+            }
+            self.previous_from_keyframe = Isometry3::identity();
+            self.frames_on_keyframe = 0;
+            // The new frame's pyramid and the reference's ignore mask and point lists are
+            // independent: build them side by side (the mask and the point lists are serial
+            // passes; the pyramid is row-parallel).
+            let (current, estimator, reference) = (&mut self.current, &mut self.estimator, &self.reference);
+            let (built, prepared) = rayon::join(
+                || current.build(gray, depth_m),
+                || {
+                    let ignore = ignore_in_reference()?;
+                    if let Some(m) = ignore {
+                        if m.size() != reference.size() {
+                            return Err(Error::SizeMismatch {
+                                what: "ignore mask vs frame".into(),
+                                expected: reference.size(),
+                                found: m.size(),
+                            });
+                        }
                     }
-                }
-                estimator.prepare_reference(reference, ignore)
-            },
-        );
-        built?;
-        prepared?;
+                    estimator.prepare_reference(reference, ignore)
+                },
+            );
+            // After an error the reference (the previous frame) is prepared again next time.
+            built?;
+            prepared?;
+            self.new_reference = false;
+        } else {
+            self.current.build(gray, depth_m)?;
+        }
         let prior = if self.config().init_from_previous_motion {
             self.previous_motion
         } else {
             None
         };
         let initial = initial_current_from_reference.copied().or(prior);
-        let estimate = self.estimator.estimate_prepared(
-            &self.current,
-            initial.as_ref(),
-            self.previous_motion.as_ref(),
-        )?;
-        std::mem::swap(&mut self.reference, &mut self.current);
+        let estimate = match keyframes {
+            None => self.estimator.estimate_prepared(
+                &self.current,
+                initial.as_ref(),
+                self.previous_motion.as_ref(),
+            )?,
+            Some(limits) => {
+                // Motions from the previous frame, carried to motions from the keyframe.
+                let from_keyframe = |m: Isometry3<f64>| m * self.previous_from_keyframe;
+                let mut estimate = self.estimator.estimate_prepared(
+                    &self.current,
+                    initial.map(from_keyframe).as_ref(),
+                    self.previous_motion.map(from_keyframe).as_ref(),
+                )?;
+                let current_from_keyframe = estimate.current_from_reference;
+                estimate.current_from_reference =
+                    current_from_keyframe * self.previous_from_keyframe.inverse();
+                self.previous_from_keyframe = current_from_keyframe;
+                self.frames_on_keyframe += 1;
+                let used = estimate.pixels_used as f64 / estimate.reference_pixels.max(1) as f64;
+                self.new_reference = !estimate.is_converged()
+                    || self.frames_on_keyframe >= limits.max_frames
+                    || current_from_keyframe.translation.vector.norm() > limits.max_translation_m
+                    || current_from_keyframe.rotation.angle() > limits.max_rotation_rad
+                    || used < limits.min_used_fraction;
+                estimate
+            }
+        };
+        match &mut self.previous {
+            None => std::mem::swap(&mut self.reference, &mut self.current),
+            Some(previous) => std::mem::swap(previous, &mut self.current),
+        }
         self.previous_motion = estimate.is_converged().then_some(estimate.current_from_reference);
         Ok(Some(estimate))
     }

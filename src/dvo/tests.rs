@@ -6,6 +6,7 @@ use super::*;
 fn profiles_validate_and_differ_where_documented() {
     DvoConfig::paper().validate().unwrap();
     DvoConfig::release().validate().unwrap();
+    DvoConfig::closed_loop().validate().unwrap();
     assert_eq!(DvoConfig::default(), DvoConfig::paper());
     let r = DvoConfig::release();
     assert!((r.k_intensity.at_level(3) - 16.0 / 255.0).abs() < 1e-6);
@@ -105,6 +106,36 @@ fn validation_names_the_bad_field() {
                 ..DvoConfig::paper()
             },
             "max_depth_m",
+        ),
+        (
+            DvoConfig {
+                keyframe: Some(KeyframeConfig {
+                    max_frames: 0,
+                    ..KeyframeConfig::default()
+                }),
+                ..DvoConfig::paper()
+            },
+            "keyframe.max_frames",
+        ),
+        (
+            DvoConfig {
+                keyframe: Some(KeyframeConfig {
+                    max_rotation_rad: f64::NAN,
+                    ..KeyframeConfig::default()
+                }),
+                ..DvoConfig::paper()
+            },
+            "keyframe.max_rotation_rad",
+        ),
+        (
+            DvoConfig {
+                keyframe: Some(KeyframeConfig {
+                    max_moving_fraction: 1.5,
+                    ..KeyframeConfig::default()
+                }),
+                ..DvoConfig::paper()
+            },
+            "keyframe.max_moving_fraction",
         ),
         (
             DvoConfig {

@@ -555,6 +555,15 @@ impl Processor {
         };
         stats.detector_us = detect_started.elapsed().as_micros() as u64;
         stats.moving_fraction = stats.detector.mask_pixels as f64 / size.area().max(1) as f64;
+        if let MotionSource::Dvo { tracker, .. } = &mut self.source {
+            if tracker
+                .config()
+                .keyframe
+                .is_some_and(|k| stats.moving_fraction > k.max_moving_fraction)
+            {
+                tracker.end_keyframe();
+            }
+        }
         self.world_from_camera = world_from_camera;
         let current_from_previous = if self.frames == 0 {
             Isometry3::identity()
