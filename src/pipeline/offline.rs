@@ -245,6 +245,19 @@ impl OfflineConfig {
     }
 }
 
+/// What the registration check ([`OfflineConfig::unregistered_colour`]) decided.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ColourRegistration {
+    /// The colour was found registered to the depth (the paper's refinement and the hysteresis
+    /// ran); false: the unregistered recording's refinement ran.
+    pub registered: bool,
+    /// The median score decided on (`None`: no frame had enough depth edges to be scored, which
+    /// counts as registered).
+    pub score: Option<f32>,
+    /// The score below which colour counts as not registered.
+    pub min_score: f32,
+}
+
 /// A frame waiting for its backward and refinement passes.
 #[derive(Debug, Clone)]
 struct Buffered {
@@ -463,6 +476,16 @@ impl OfflineProcessor {
     /// before, where it is off, or without a frame with enough depth edges).
     pub fn registration_score(&self) -> Option<f32> {
         self.registration_score
+    }
+
+    /// The registration check's decision, for reports (`None` before it has decided or where
+    /// it is off).
+    pub fn colour_registration(&self) -> Option<ColourRegistration> {
+        Some(ColourRegistration {
+            registered: self.colour_registered?,
+            score: self.registration_score,
+            min_score: self.config.unregistered_colour?.min_score,
+        })
     }
 
     /// Measures `frame` for the registration check, and decides once it has its frames or the

@@ -5,7 +5,7 @@
 use crate::error::Result;
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::ImageSize;
-use crate::pipeline::offline::OfflineProcessor;
+use crate::pipeline::offline::{ColourRegistration, OfflineProcessor};
 use crate::pipeline::{FrameInput, FrameResult, ProcessingMode, Processor, ProcessorConfig};
 
 #[cfg(doc)]
@@ -27,6 +27,12 @@ pub trait FrameProcessor {
     /// As [`Self::push`].
     fn finish(&mut self) -> Result<Vec<FrameResult>> {
         Ok(Vec::new())
+    }
+
+    /// What the offline mode's colour/depth registration check decided (`None` where it did
+    /// not run).
+    fn colour_registration(&self) -> Option<ColourRegistration> {
+        None
     }
 }
 
@@ -103,6 +109,13 @@ impl FrameProcessor for PipelineProcessor {
             })?;
         }
         Ok(done)
+    }
+
+    fn colour_registration(&self) -> Option<ColourRegistration> {
+        match &self.pipeline {
+            Pipeline::Causal(_) => None,
+            Pipeline::Offline(processor) => processor.colour_registration(),
+        }
     }
 }
 

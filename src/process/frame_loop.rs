@@ -114,6 +114,7 @@ impl FrameLoop {
                 let pipeline_start = Instant::now();
                 let results = processor.finish()?;
                 self.report.timings.pipeline_s += pipeline_start.elapsed().as_secs_f64();
+                self.report.colour_registration = processor.colour_registration();
                 for result in results {
                     self.write_result(ctx, output, hooks, result)?;
                 }

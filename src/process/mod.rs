@@ -258,6 +258,7 @@ pub fn process_file<W: Write + Seek + Send>(
             timings: LoopTimings::default(),
             anchor_skipped,
             anchor_frame: None,
+            colour_registration: None,
         },
     };
     let ctx = FrameContext {

@@ -4,6 +4,7 @@
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::mcap_io::input::detect::RgbdTopics;
 use crate::mcap_io::input::Truncation;
+use crate::pipeline::offline::ColourRegistration;
 
 use super::rectify::InputGeometry;
 #[cfg(doc)]
@@ -60,6 +61,9 @@ pub struct ProcessReport {
     /// The frame the odometry was anchored at: the first processed frame the anchor channel
     /// covers (`None` when not anchored).
     pub anchor_frame: Option<AnchorFrame>,
+    /// What the offline mode's colour/depth registration check decided (`None` in the causal
+    /// mode, with external poses, or with the check off).
+    pub colour_registration: Option<ColourRegistration>,
 }
 
 /// Which frame anchored the odometry ([`ProcessReport::anchor_frame`]).

@@ -368,3 +368,65 @@ fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
     assert!(stderr(&out).contains("max_iterations"), "{}", stderr(&out));
     assert!(!output.exists());
 }
+
+/// The offline mode's colour/depth registration check (docs/method.md D18) reports what it
+/// decided: 7-Scenes (colour not registered to depth; its first 3.5 s) gets a warning naming the
+/// score and the flag that turns the check off, the registered TUM excerpt none.
+#[test]
+fn an_unregistered_recording_is_reported_and_a_registered_one_is_not() {
+    let tmp = tempfile::tempdir().unwrap();
+    let desk = tmp.path().join("desk.mcap");
+    let out = occmask(&[
+        "convert".as_ref(),
+        "tum".as_ref(),
+        crate::common::data::tum_fixture().as_os_str(),
+        "-q".as_ref(),
+        "-o".as_ref(),
+        desk.as_os_str(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let annotated = tmp.path().join("desk.out.mcap");
+    let out = occmask(&[
+        "process".as_ref(),
+        desk.as_os_str(),
+        "-o".as_ref(),
+        annotated.as_os_str(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("not registered"), "{}", stderr(&out));
+
+    let Some(src) = crate::common::data::real_data(
+        "7scenes_redkitchen_300",
+        "process_cli::an_unregistered_recording_is_reported_and_a_registered_one_is_not",
+    ) else {
+        return;
+    };
+    let kitchen = tmp.path().join("kitchen.mcap");
+    let out = occmask(&[
+        "convert".as_ref(),
+        "tum".as_ref(),
+        src.as_os_str(),
+        "--camera".as_ref(),
+        "585,585,320,240".as_ref(),
+        "-q".as_ref(),
+        "-o".as_ref(),
+        kitchen.as_os_str(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let annotated = tmp.path().join("kitchen.out.mcap");
+    let out = occmask(&[
+        "process".as_ref(),
+        kitchen.as_os_str(),
+        "--end".as_ref(),
+        "3.5".as_ref(),
+        "-o".as_ref(),
+        annotated.as_os_str(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("colour not registered to depth (registration score 0.")
+            && err.contains("no_registration_check.json"),
+        "{err}"
+    );
+}

@@ -64,6 +64,17 @@ pub(super) fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> 
             input.display()
         ));
     }
+    if let Some(r) = rep.colour_registration.filter(|r| !r.registered) {
+        out.push(format!(
+            "{}: colour not registered to depth (registration score {:.2}, below {:.2}): the \
+             offline refinement weighted the depth and left out the temporal hysteresis \
+             (docs/method.md D18; `--config tools/detector_configs/no_registration_check.json` \
+             turns the check off)",
+            input.display(),
+            r.score.unwrap_or(f32::NAN),
+            r.min_score
+        ));
+    }
     if rep.out_of_order_frames > 0 {
         out.push(format!(
             "{}: skipped {} frame(s) whose colour stamp is not after the previous frame's \
