@@ -108,9 +108,10 @@ pub struct UnregisteredColourConfig {
     /// Colour counts as not registered when the median [`registration::RegistrationProfile::score`]
     /// of the measured frames is below this.
     pub min_score: f32,
-    /// Frames measured: the first ones with enough depth edges
-    /// ([`registration::MIN_EDGE_PIXELS`]); the decision is taken earlier if the refinement pass
-    /// is due first.
+    /// The check looks at the first this many frames and measures every
+    /// [`REGISTRATION_FRAME_STRIDE`]-th of them (those with enough depth edges,
+    /// [`registration::MIN_EDGE_PIXELS`], give a score); the decision is taken earlier if the
+    /// refinement pass is due first.
     pub frames: usize,
     /// The refinement pass's DVO on such a recording.
     pub refinement_dvo: DvoConfig,
@@ -126,6 +127,11 @@ pub const DEFAULT_MIN_REGISTRATION_SCORE: f32 = 1.5;
 /// Default [`UnregisteredColourConfig::frames`]: the frames buffered before the first
 /// refinement at the default block and look-ahead, so the check delays nothing.
 pub const DEFAULT_REGISTRATION_FRAMES: usize = DEFAULT_BLOCK_FRAMES + DEFAULT_LOOKAHEAD_FRAMES;
+/// The registration check measures every this many frames: one scan of a VGA frame cost 2.7 % of
+/// `process`'s CPU on the 200-frame Bonn window when every frame was measured, and a third of the
+/// first 90 frames decides the same on the real recordings (medians: TUM fr2_desk 2.6, the Bonn
+/// crowd 2.5, 7-Scenes 0.87 against 0.90 from all 90).
+pub const REGISTRATION_FRAME_STRIDE: usize = 3;
 /// Default refinement weights on unregistered colour: the depth term weighted (γ 10, k_Z 5 cm).
 pub const UNREGISTERED_DEPTH_WEIGHT_GAMMA: f32 = 10.0;
 /// See [`UNREGISTERED_DEPTH_WEIGHT_GAMMA`].
@@ -309,6 +315,8 @@ pub struct OfflineProcessor {
 /// find the colour not registered.
 struct RegistrationCheck {
     config: UnregisteredColourConfig,
+    /// Frames pushed so far, and the scores of those measured.
+    frames_seen: usize,
     scores: Vec<f32>,
     /// The refinement pass's processor config on unregistered colour.
     refine: ProcessorConfig,
@@ -419,7 +427,8 @@ impl OfflineProcessor {
         let registration = match (config.pose_source, offline.unregistered_colour) {
             (PoseSource::DvoClosedLoop, Some(unregistered)) => Some(RegistrationCheck {
                 config: unregistered,
-                scores: Vec::with_capacity(unregistered.frames),
+                frames_seen: 0,
+                scores: Vec::with_capacity(unregistered.frames.div_ceil(REGISTRATION_FRAME_STRIDE)),
                 refine: ProcessorConfig {
                     dvo: refinement_dvo(&offline, unregistered.refinement_dvo, size),
                     ..refine
@@ -495,18 +504,19 @@ impl OfflineProcessor {
             return Ok(());
         };
         if let Some(frame) = frame {
-            if check.scores.len() < check.config.frames {
+            if check.frames_seen % REGISTRATION_FRAME_STRIDE == 0 && check.frames_seen < check.config.frames {
                 // NaN gray (invalid input) gives no score.
                 let score = RegistrationProfile::measure(frame.gray, frame.depth_m)
                     .map(|profile| profile.score())
                     .filter(|score| !score.is_nan());
                 check.scores.extend(score);
             }
+            check.frames_seen += 1;
         }
         let window = self.config.block_frames + self.config.lookahead_frames;
         let refinement_due =
             frame.is_none() || self.later.buffer.len() >= window || !self.later.ready.is_empty();
-        if check.scores.len() < check.config.frames && !refinement_due {
+        if check.frames_seen < check.config.frames && !refinement_due {
             return Ok(());
         }
         let score = median(&mut check.scores);
