@@ -88,7 +88,7 @@ use std::time::Instant;
 use nalgebra::Isometry3;
 
 use crate::dvo::completion::IgnoreCompletion;
-use crate::dvo::{DvoStatus, DvoTracker};
+use crate::dvo::{DvoConfig, DvoStatus, DvoTracker};
 use crate::error::{Error, Result};
 use crate::geometry::se3::{is_finite_pose, rotation_angle_rad};
 use crate::geometry::PinholeIntrinsics;
@@ -240,9 +240,21 @@ impl Processor {
         config.failure.validate()?;
         let detector = OcclusionDetector::new(size, intrinsics, config.occlusion)?;
         let source = match config.pose_source {
-            PoseSource::DvoClosedLoop | PoseSource::DvoUnmasked => MotionSource::Dvo {
+            PoseSource::DvoClosedLoop => MotionSource::Dvo {
                 tracker: Box::new(DvoTracker::new(size, intrinsics, config.dvo)?),
-                closed_loop: config.pose_source == PoseSource::DvoClosedLoop,
+                closed_loop: true,
+            },
+            // The paper's baseline tracks frame to frame.
+            PoseSource::DvoUnmasked => MotionSource::Dvo {
+                tracker: Box::new(DvoTracker::new(
+                    size,
+                    intrinsics,
+                    DvoConfig {
+                        keyframe: None,
+                        ..config.dvo
+                    },
+                )?),
+                closed_loop: false,
             },
             PoseSource::External { camera_from_marker } => MotionSource::External {
                 marker_from_camera: camera_from_marker.map_or_else(Isometry3::identity, |c| c.inverse()),
@@ -556,11 +568,10 @@ impl Processor {
         stats.detector_us = detect_started.elapsed().as_micros() as u64;
         stats.moving_fraction = stats.detector.mask_pixels as f64 / size.area().max(1) as f64;
         if let MotionSource::Dvo { tracker, .. } = &mut self.source {
-            if tracker
-                .config()
-                .keyframe
-                .is_some_and(|k| stats.moving_fraction > k.max_moving_fraction)
-            {
+            let detector_frames = self.detector.frames_processed();
+            if tracker.config().keyframe.is_some_and(|k| {
+                stats.moving_fraction > k.max_moving_fraction || detector_frames < k.min_detector_frames
+            }) {
                 tracker.end_keyframe();
             }
         }

@@ -174,8 +174,8 @@ fn tum_fr2_desk_static_with_dvo_poses_has_few_false_positives() {
 
 /// The causal closed loop on 7-Scenes' static kitchen: DVO tracks against keyframes while
 /// nothing moves (docs/method.md D19), so the pose errors that frame-to-frame tracking adds up
-/// (and the detector then marks) stay small. Measured: mean 0.037 %, max 0.514 %, no frame above
-/// 1 %; frame to frame mean 0.524 %, max 3.906 %, 38 frames. Bounds: 4× the mean, the 1 % limit
+/// (and the detector then marks) stay small. Measured: mean 0.028 %, max 0.447 %, no frame above
+/// 1 %; frame to frame mean 0.524 %, max 3.906 %, 38 frames. Bounds: 5× the mean, the 1 % limit
 /// per frame.
 #[test]
 fn seven_scenes_redkitchen_causal_closed_loop_with_keyframes_has_few_false_positives() {
