@@ -241,22 +241,13 @@ fn failure_class_stop_and_go() {
 }
 
 /// Late onset, an object that rests for 1.5 s and then slides slowly (its own width in 43
-/// frames): below the targets. Measured F1 0.828, onset 19 frames (with the offline passes' DVO
-/// at 80×60 and 160×120, `offline.first_pass_min_side_px` and `refinement_min_side_px` 0: 0.835,
-/// 17; the paper's accumulation alone: 0.778, 24; without the temporal hysteresis 0.825, 21);
-/// bounds F1 0.80, onset 21. The true pose reaches F1 0.954, onset 0: the backward pass, on the
-/// first pass's poses, masks only part of the box (about 3 600 of its 9 000 pixels against 8 400
-/// with the true poses) until it has moved about its width.
+/// frames), at its targets: while it rests, the first pass tracks against keyframes
+/// (docs/method.md D19), and the backward pass, on those poses, masks the box from its first
+/// frame of motion. Measured F1 0.952, onset 0 (frame to frame, `dvo.keyframe` null: 0.828,
+/// 19; the paper's accumulation alone: 0.778, 24); bounds: the targets. Its frames before the
+/// motion are marked too (up to 11.3 % of the image, the box itself: it is about to move).
 #[test]
 fn failure_class_rests_then_moves_slowly() {
-    let score = default_mode(Scenario::RestsThenMovesSlowly);
-    assert_class(&score, "rests_then_moves_slowly", 0.80, 21);
-}
-
-/// The target for [`failure_class_rests_then_moves_slowly`] (not met: F1 0.828, onset 19).
-#[test]
-#[ignore = "not met by the default: F1 0.828, onset 19 frames"]
-fn failure_class_rests_then_moves_slowly_target() {
     let score = default_mode(Scenario::RestsThenMovesSlowly);
     assert_class(
         &score,
@@ -306,7 +297,8 @@ fn failure_class_sliding_on_desk_target() {
 }
 
 /// Dominant from the first frame: with the first pass's DVO at 160×120 it follows the
-/// background, but the mask reaches half the board only at frame 85. Measured F1 0.497, onset 85,
+/// background (and, over the detector's first 30 frames, frame to frame: D19), but the mask
+/// reaches half the board only at frame 85. Measured F1 0.491, onset 85,
 /// ATE 0.056 m (with the offline passes' DVO at 80×60 and 160×120 it followed the board: F1
 /// 0.035, never half found, ATE 0.286 m; the true pose: F1 0.889, onset 0). Bounds F1 0.45, ATE
 /// 0.08 m.
@@ -321,9 +313,9 @@ fn failure_class_dominant_from_start() {
     assert!(score.ate_m <= 0.08, "ATE {:.3} m", score.ate_m);
 }
 
-/// The target for the dominant-from-start class (not met: F1 0.497, onset 85).
+/// The target for the dominant-from-start class (not met: F1 0.491, onset 85).
 #[test]
-#[ignore = "not met by the default: F1 0.497, onset 85 frames"]
+#[ignore = "not met by the default: F1 0.491, onset 85 frames"]
 fn failure_class_dominant_from_start_target() {
     let score = default_mode(Scenario::DominantFromStart);
     assert_class(
