@@ -648,8 +648,8 @@ impl DvoTracker {
     ///
     /// # Errors
     /// [`Error::SizeMismatch`] when an image or the mask is not the tracker's size (the
-    /// tracker's state is then unchanged), [`Error::InvalidParameter`] for a non-finite
-    /// initial guess.
+    /// tracker's state is then unchanged, except that with keyframes the next frame is tracked
+    /// against the previous frame), [`Error::InvalidParameter`] for a non-finite initial guess.
     pub fn track(
         &mut self,
         gray: &GrayF32,
