@@ -305,10 +305,8 @@ pub struct OfflineProcessor {
     later: LaterPasses,
     /// The colour/depth registration check, until it has decided (closed loop only).
     registration: Option<RegistrationCheck>,
-    /// Its decision: `Some(false)` once the colour was found not registered.
-    colour_registered: Option<bool>,
-    /// The median score it decided on (`None` without a frame with enough depth edges).
-    registration_score: Option<f32>,
+    /// Its decision, once taken.
+    registration_decision: Option<ColourRegistration>,
 }
 
 /// The registration scores of the first frames and what replaces the refinement pass if they
@@ -469,8 +467,7 @@ impl OfflineProcessor {
                 hysteresis,
             },
             registration,
-            colour_registered: None,
-            registration_score: None,
+            registration_decision: None,
         })
     }
 
@@ -478,23 +475,19 @@ impl OfflineProcessor {
     /// DVO and hysteresis follow; [`OfflineConfig::unregistered_colour`]): `None` before the
     /// check has decided or where it is off.
     pub fn colour_registered(&self) -> Option<bool> {
-        self.colour_registered
+        self.registration_decision.map(|d| d.registered)
     }
 
     /// The median [`registration::RegistrationProfile::score`] the check decided on (`None`
     /// before, where it is off, or without a frame with enough depth edges).
     pub fn registration_score(&self) -> Option<f32> {
-        self.registration_score
+        self.registration_decision.and_then(|d| d.score)
     }
 
     /// The registration check's decision, for reports (`None` before it has decided or where
     /// it is off).
     pub fn colour_registration(&self) -> Option<ColourRegistration> {
-        Some(ColourRegistration {
-            registered: self.colour_registered?,
-            score: self.registration_score,
-            min_score: self.config.unregistered_colour?.min_score,
-        })
+        self.registration_decision
     }
 
     /// Measures `frame` for the registration check, and decides once it has its frames or the
@@ -521,7 +514,6 @@ impl OfflineProcessor {
         }
         let score = median(&mut check.scores);
         let registered = score.is_none_or(|score| score >= check.config.min_score);
-        self.registration_score = score;
         if !registered {
             let size = self.later.size;
             self.later.refine = Processor::new(size, check.intrinsics, check.refine)?;
@@ -537,7 +529,11 @@ impl OfflineProcessor {
                 .slow_evidence
                 .and_then(|_| Hysteresis::new(&offline, size, check.intrinsics));
         }
-        self.colour_registered = Some(registered);
+        self.registration_decision = Some(ColourRegistration {
+            registered,
+            score,
+            min_score: check.config.min_score,
+        });
         self.registration = None;
         Ok(())
     }
