@@ -88,6 +88,12 @@ pub struct OcclusionConfig {
     /// within this many pixels of the image border: an object leaving the view loses its
     /// non-predicted part through the border first. 0 = prune it (the release).
     pub prune_exit_margin_px: usize,
+    /// Runs of pixels without depth (after the hole filling from the previous frame) along a
+    /// row or column, bounded by the mask on both sides or by the mask and the image border,
+    /// join the mask when at most this long (pixels at 640 px image width, scaled with the
+    /// width): the sensor's invalid border band beside an object entering the view, holes on
+    /// its dark parts (see [`super::gaps`]). Not in the paper; 0 = off (the paper).
+    pub invalid_depth_gap_px_vga: usize,
     /// Motion check (not in the paper): when the given motion explains the depth worse than no
     /// motion at all by more than this margin (a fraction of the sampled pixels, see
     /// [`consistency::depth_consistency`]), the motion is taken to be wrong and the detector
@@ -130,6 +136,7 @@ impl Default for OcclusionConfig {
             thin_structure_radius_px: 1,
             thin_structure_border_margin_px: 16,
             prune_exit_margin_px: EXIT_MARGIN_PX,
+            invalid_depth_gap_px_vga: INVALID_DEPTH_GAP_PX_VGA,
             motion_check_margin: Some(MOTION_CHECK_MARGIN),
             appearance_growth: None,
             slow_evidence: Some(SlowEvidenceConfig::default()),
@@ -147,6 +154,11 @@ const MOTION_CHECK_MARGIN: f32 = 0.1;
 /// the prediction never writes the outermost ring, so a leaving object's remainder ends a few
 /// pixels inside the image; 8 px covers that with room for the warp's rounding.
 const EXIT_MARGIN_PX: usize = 8;
+
+/// Default `invalid_depth_gap_px_vga`: the invalid band structured-light sensors leave along
+/// the image border is 10–29 px wide at VGA on the TUM and Bonn recordings (the median run from
+/// each border); 32 px spans it.
+const INVALID_DEPTH_GAP_PX_VGA: usize = 32;
 
 impl OcclusionConfig {
     /// Checks every parameter.
@@ -190,6 +202,17 @@ impl OcclusionConfig {
     /// Minimum object component size for an image of `size` (500 px × area / VGA area, ≥ 1).
     pub fn min_object_pixels(&self, size: ImageSize) -> usize {
         scaled_pixels(self.min_object_pixels_vga, size)
+    }
+
+    /// [`Self::invalid_depth_gap_px_vga`] for an image of `size` (scaled with its width; 0 stays
+    /// 0, otherwise at least 1).
+    pub fn invalid_depth_gap_px(&self, size: ImageSize) -> usize {
+        if self.invalid_depth_gap_px_vga == 0 {
+            return 0;
+        }
+        ((self.invalid_depth_gap_px_vga * size.width) as f64 / 640.0)
+            .round()
+            .max(1.0) as usize
     }
 
     /// τ for depth `z_m` with coefficient `coefficient` in this config's form.

@@ -36,6 +36,7 @@
 mod components;
 mod config;
 pub mod consistency;
+pub mod gaps;
 mod growth;
 pub(crate) mod runs;
 mod slow;
@@ -129,6 +130,8 @@ pub struct OcclusionDetector {
     intrinsics: PinholeIntrinsics,
     size: ImageSize,
     min_object_pixels: usize,
+    /// [`OcclusionConfig::invalid_depth_gap_px_vga`] at this size, and its scratch.
+    invalid_depth_gaps: gaps::InvalidDepthGaps,
     frames: u64,
     /// Normalised pixel rays (per sequence).
     rays: PixelRays,
@@ -201,6 +204,7 @@ impl OcclusionDetector {
             intrinsics,
             size,
             min_object_pixels: config.min_object_pixels(size),
+            invalid_depth_gaps: gaps::InvalidDepthGaps::new(size, config.invalid_depth_gap_px(size)),
             frames: 0,
             rays: PixelRays::new(&intrinsics, size.width, size.height),
             transport_scratch: TransportScratch::new(size.width, size.height),
@@ -626,6 +630,14 @@ impl OcclusionDetector {
             slow_us += started.elapsed().as_micros() as u64;
         }
         self.stats.slow_us = slow_us;
+
+        // Runs without depth between object pixels (or an object and the border) join the
+        // published mask (DVO has no points there, whichever mask it ignores).
+        let added = self
+            .invalid_depth_gaps
+            .fill(&mut self.mask, &self.compensated_m)
+            .expect("the detector's mask and compensated depth share its size");
+        self.stats.mask_pixels += added;
     }
 }
 

@@ -719,8 +719,9 @@ fn object_mask_builds_match_the_definition() {
 #[test]
 fn the_mask_is_exactly_the_thresholded_accumulation_after_every_update() {
     // The object-mask pass only evaluates A > τ_α inside the box of O₀ and the predicted
-    // pixels; that must lose nothing: without growth, O = {A > τ_α} on the whole image after
-    // every update (pruned pixels have A = 0), and P ⊆ O.
+    // pixels; that must lose nothing: without growth and the invalid-depth gap fill (which add
+    // pixels to O), O = {A > τ_α} on the whole image after every update (pruned pixels have
+    // A = 0), and P ⊆ O.
     let sequence_config = SequenceConfig {
         size: ImageSize::new(160, 120),
         ..SequenceConfig::default()
@@ -730,6 +731,7 @@ fn the_mask_is_exactly_the_thresholded_accumulation_after_every_update() {
         let sequence = SyntheticSequence::new(scenario, sequence_config);
         let config = OcclusionConfig {
             appearance_growth: None,
+            invalid_depth_gap_px_vga: 0,
             ..OcclusionConfig::default()
         };
         let mut detector =

@@ -1,0 +1,218 @@
+//! Closing the mask across pixels without depth.
+//!
+//! The detector judges a pixel by its depth; where the sensor gives none (and the previous
+//! frame's warped depth does not fill it), the pixel stays unmarked even inside an object. Two
+//! cases show in every recording: the band of invalid depth that structured-light sensors leave
+//! along the image border (10–30 px at VGA on TUM and Bonn), so that a person entering the view
+//! is masked only from the band's inner edge on; and holes on dark or shiny parts of an object
+//! (hair, black clothing). [`InvalidDepthGaps::fill`] marks a run of such pixels along a row or
+//! a column when mask pixels bound it on both sides, or a mask pixel on one side and the image
+//! border on the other, and it is at most `max_gap_px` long. Pixels with depth are never added,
+//! so the fill cannot reach a surface the detector saw as static.
+
+use crate::error::{Error, Result};
+use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET};
+
+/// [`Self::fill`]'s scratch, allocated once for an image size.
+#[derive(Debug, Clone)]
+pub struct InvalidDepthGaps {
+    max_gap_px: usize,
+    /// The pixels to add (0 / [`MASK_SET`]): both directions are judged on the mask as given.
+    added: Mask,
+    /// Per column: the row where its open run of unmarked pixels without depth started
+    /// (`usize::MAX`: none), and what bounds the run from above (`None`: the top border).
+    run_start: Vec<usize>,
+    bounded_above: Vec<Option<bool>>,
+}
+
+impl InvalidDepthGaps {
+    /// Scratch for masks of `size`, filling runs of at most `max_gap_px` (0: none).
+    pub fn new(size: ImageSize, max_gap_px: usize) -> Self {
+        Self {
+            max_gap_px,
+            added: Mask::filled(size, 0),
+            run_start: vec![usize::MAX; size.width],
+            bounded_above: vec![None; size.width],
+        }
+    }
+
+    /// Marks in `mask` every run of pixels without depth in `depth_m` (≤ 0 or NaN) along a row
+    /// or a column that is at most `max_gap_px` long and bounded at both ends by a marked pixel
+    /// or the image border, with at least one marked end (see the module docs). Both directions
+    /// are judged on the mask as given. Returns the pixels added; allocates nothing.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when the mask or `depth_m` is not the scratch's size.
+    pub fn fill(&mut self, mask: &mut Mask, depth_m: &DepthMeters) -> Result<usize> {
+        let size = self.added.size();
+        for (what, found) in [
+            ("invalid-depth gap fill mask", mask.size()),
+            ("invalid-depth gap fill depth", depth_m.size()),
+        ] {
+            if found != size {
+                return Err(Error::SizeMismatch {
+                    what: what.into(),
+                    expected: size,
+                    found,
+                });
+            }
+        }
+        let (w, h, max_gap_px) = (size.width, size.height, self.max_gap_px);
+        if max_gap_px == 0 || w == 0 || h == 0 {
+            return Ok(0);
+        }
+        let depth = depth_m.as_slice();
+        let m = mask.as_slice();
+        let set = |i: usize| m[i] != 0;
+        // NaN counts as invalid.
+        let open = |i: usize| !set(i) && (depth[i].is_nan() || depth[i] <= 0.0);
+        let added = self.added.as_mut_slice();
+        added.fill(0);
+        // Rows.
+        for y in 0..h {
+            let row = y * w;
+            let mut x = 0;
+            while x < w {
+                if !open(row + x) {
+                    x += 1;
+                    continue;
+                }
+                let start = x;
+                while x < w && open(row + x) {
+                    x += 1;
+                }
+                let before = (start > 0).then(|| set(row + start - 1));
+                let after = (x < w).then(|| set(row + x));
+                if bounded(before, after) && x - start <= max_gap_px {
+                    added[row + start..row + x].fill(MASK_SET);
+                }
+            }
+        }
+        // Columns, a row at a time (one row past the last closes the runs at the bottom).
+        self.run_start.fill(usize::MAX);
+        for y in 0..=h {
+            for x in 0..w {
+                if y < h && open(y * w + x) {
+                    if self.run_start[x] == usize::MAX {
+                        self.run_start[x] = y;
+                        self.bounded_above[x] = (y > 0).then(|| set((y - 1) * w + x));
+                    }
+                    continue;
+                }
+                let start = std::mem::replace(&mut self.run_start[x], usize::MAX);
+                if start == usize::MAX {
+                    continue;
+                }
+                let below = (y < h).then(|| set(y * w + x));
+                if bounded(self.bounded_above[x], below) && y - start <= max_gap_px {
+                    for yy in start..y {
+                        added[yy * w + x] = MASK_SET;
+                    }
+                }
+            }
+        }
+        let mut count = 0;
+        for (m, &a) in mask.as_mut_slice().iter_mut().zip(added.iter()) {
+            count += usize::from(a != 0);
+            *m |= a;
+        }
+        Ok(count)
+    }
+}
+
+/// A run is filled when each end is a marked pixel (`Some(true)`) or the border (`None`), and
+/// at least one end is marked.
+fn bounded(before: Option<bool>, after: Option<bool>) -> bool {
+    match (before, after) {
+        (Some(a), Some(b)) => a && b,
+        (None, Some(b)) => b,
+        (Some(a), None) => a,
+        (None, None) => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mask and a depth image from rows of characters: `#` marked with depth, `o` marked
+    /// without depth, `.` unmarked with depth, `_` unmarked without depth.
+    fn scene(rows: &[&str]) -> (Mask, DepthMeters) {
+        let size = ImageSize::new(rows[0].len(), rows.len());
+        let mut mask = Mask::filled(size, 0);
+        let mut depth = DepthMeters::filled(size, 1.0);
+        for (y, row) in rows.iter().enumerate() {
+            for (x, c) in row.chars().enumerate() {
+                let i = y * size.width + x;
+                if matches!(c, '#' | 'o') {
+                    mask.as_mut_slice()[i] = MASK_SET;
+                }
+                if matches!(c, 'o' | '_') {
+                    depth.as_mut_slice()[i] = 0.0;
+                }
+            }
+        }
+        (mask, depth)
+    }
+
+    fn fill(mask: &mut Mask, depth: &DepthMeters, max_gap_px: usize) -> Result<usize> {
+        InvalidDepthGaps::new(mask.size(), max_gap_px).fill(mask, depth)
+    }
+
+    fn render(mask: &Mask) -> Vec<String> {
+        mask.as_slice()
+            .chunks(mask.width())
+            .map(|r| r.iter().map(|&m| if m != 0 { '#' } else { '.' }).collect())
+            .collect()
+    }
+
+    #[test]
+    fn border_band_next_to_an_object_is_filled_up_to_the_limit() {
+        let (mut mask, depth) = scene(&[
+            "__##....", //
+            "___#....", "____#...", "__......",
+        ]);
+        let added = fill(&mut mask, &depth, 3).unwrap();
+        // Row 2's run of 4 is longer than 3; row 3's run has no marked end.
+        assert_eq!(render(&mask), ["####....", "####....", "....#...", "........"]);
+        assert_eq!(added, 5);
+    }
+
+    #[test]
+    fn holes_inside_an_object_are_filled_in_both_directions_but_never_pixels_with_depth() {
+        let (mut mask, depth) = scene(&[
+            ".#.#.", //
+            "#___#", ".#_#.", "..#..",
+        ]);
+        fill(&mut mask, &depth, 3).unwrap();
+        // Row 1's run is bounded by marks; column 2's run (rows 1–2) by the marks above and below.
+        assert_eq!(render(&mask), [".#.#.", "#####", ".###.", "..#.."]);
+        let (mut mask, depth) = scene(&[".#.", "#.#", ".#."]);
+        assert_eq!(fill(&mut mask, &depth, 3).unwrap(), 0);
+    }
+
+    #[test]
+    fn runs_between_an_object_and_the_background_stay_unmarked() {
+        let (mut mask, depth) = scene(&[
+            "#__.", //
+            "____", "..#_",
+        ]);
+        // Row 0's run ends at a pixel with depth, column 0's too, row 1's touches both borders:
+        // unmarked. Row 2's run reaches the border from a mark and column 2's (rows 0–1) the
+        // top border from one: filled.
+        fill(&mut mask, &depth, 4).unwrap();
+        assert_eq!(render(&mask), ["#.#.", "..#.", "..##"]);
+    }
+
+    #[test]
+    fn no_limit_no_fill_and_a_size_mismatch_is_an_error() {
+        let (mut mask, depth) = scene(&["_#"]);
+        assert_eq!(fill(&mut mask, &depth, 0).unwrap(), 0);
+        assert_eq!(render(&mask), [".#"]);
+        let other = DepthMeters::filled(ImageSize::new(3, 1), 1.0);
+        assert!(matches!(
+            InvalidDepthGaps::new(mask.size(), 2).fill(&mut mask, &other),
+            Err(Error::SizeMismatch { .. })
+        ));
+    }
+}
