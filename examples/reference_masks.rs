@@ -108,7 +108,8 @@ fn main() -> Result<()> {
             let path = predicted.join(name(i));
             let mask =
                 dataset::read_mask(&path).with_context(|| format!("predicted mask {}", path.display()))?;
-            tally.add_masks(&mask, truth_mask)?;
+            // The reference says nothing where the sensor saw no depth.
+            tally.add_masks_where_depth_valid(&mask, truth_mask, &frames[i].depth_m)?;
             if let Some(out) = &overlay {
                 let color = &sequence.color[pairs[i].color];
                 write_overlay(&color.path, &mask, truth_mask, &out.join(name(i)))?;

@@ -6,7 +6,7 @@
 //! fraction FP / (W·H) instead.
 
 use crate::error::{Error, Result};
-use crate::image_buf::Mask;
+use crate::image_buf::{DepthMeters, Mask};
 
 /// Pixel counts of one frame (a pixel is "set" when its mask value is non-zero).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -27,18 +27,39 @@ impl FrameCounts {
     /// # Errors
     /// [`Error::SizeMismatch`] when the masks differ in size.
     pub fn of(predicted: &Mask, truth: &Mask) -> Result<Self> {
-        if predicted.size() != truth.size() {
-            return Err(Error::SizeMismatch {
-                what: "predicted mask vs ground-truth mask".into(),
-                expected: truth.size(),
-                found: predicted.size(),
-            });
+        Self::count(predicted, truth, None)
+    }
+
+    /// Counts `predicted` against `truth` on the pixels where `depth_m` is valid (> 0) only:
+    /// for a reference built from depth, which says nothing where the sensor saw none.
+    /// `pixels` is then the number of such pixels.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when the masks or the depth image differ in size.
+    pub fn of_where_depth_valid(predicted: &Mask, truth: &Mask, depth_m: &DepthMeters) -> Result<Self> {
+        Self::count(predicted, truth, Some(depth_m))
+    }
+
+    fn count(predicted: &Mask, truth: &Mask, depth_m: Option<&DepthMeters>) -> Result<Self> {
+        for (what, found) in [
+            ("predicted mask vs ground-truth mask", Some(predicted.size())),
+            ("depth image vs ground-truth mask", depth_m.map(DepthMeters::size)),
+        ] {
+            if let Some(found) = found.filter(|&f| f != truth.size()) {
+                return Err(Error::SizeMismatch {
+                    what: what.into(),
+                    expected: truth.size(),
+                    found,
+                });
+            }
         }
-        let mut counts = Self {
-            pixels: truth.size().area(),
-            ..Self::default()
-        };
-        for (&p, &t) in predicted.as_slice().iter().zip(truth.as_slice()) {
+        let mut counts = Self::default();
+        let scored = |i: usize| depth_m.is_none_or(|d| d.as_slice()[i] > 0.0);
+        for (i, (&p, &t)) in predicted.as_slice().iter().zip(truth.as_slice()).enumerate() {
+            if !scored(i) {
+                continue;
+            }
+            counts.pixels += 1;
             match (p != 0, t != 0) {
                 (true, true) => counts.true_positives += 1,
                 (true, false) => counts.false_positives += 1,
@@ -149,6 +170,22 @@ impl SegmentationTally {
         Ok(counts)
     }
 
+    /// As [`Self::add_masks`], on the pixels where `depth_m` is valid only
+    /// ([`FrameCounts::of_where_depth_valid`]).
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when the masks or the depth image differ in size.
+    pub fn add_masks_where_depth_valid(
+        &mut self,
+        predicted: &Mask,
+        truth: &Mask,
+        depth_m: &DepthMeters,
+    ) -> Result<FrameCounts> {
+        let counts = FrameCounts::of_where_depth_valid(predicted, truth, depth_m)?;
+        self.add(&counts);
+        Ok(counts)
+    }
+
     /// The averages so far.
     pub fn summary(&self) -> SegmentationSummary {
         let n = self.frames_with_truth.max(1) as f64;
@@ -198,6 +235,26 @@ mod tests {
     }
 
     #[test]
+    fn pixels_without_depth_are_not_scored() {
+        let depth =
+            DepthMeters::from_vec(ImageSize::new(6, 1), vec![1.0, 0.0, 1.0, f32::NAN, 1.0, 0.0]).unwrap();
+        let (predicted, truth) = (mask(&[1, 1, 1, 0, 0, 1]), mask(&[1, 1, 0, 1, 0, 0]));
+        let counts = FrameCounts::of_where_depth_valid(&predicted, &truth, &depth).unwrap();
+        // Pixels 1, 3 and 5 have no depth: TP at 0, FP at 2, pixel 4 agrees.
+        assert_eq!(
+            (
+                counts.true_positives,
+                counts.false_positives,
+                counts.false_negatives,
+                counts.pixels
+            ),
+            (1, 1, 0, 3)
+        );
+        let all = FrameCounts::of(&predicted, &truth).unwrap();
+        assert_eq!(all.pixels, 6);
+    }
+
+    #[test]
     fn empty_prediction_on_non_empty_truth_scores_zero_and_empty_truth_frames_count_fp() {
         let mut tally = SegmentationTally::default();
         tally
@@ -220,5 +277,7 @@ mod tests {
         assert!((s.empty_truth_max_fp_fraction - 0.25).abs() < 1e-12);
         assert_eq!(s.empty_truth_frames_with_fp, 1);
         assert!(FrameCounts::of(&mask(&[0]), &mask(&[0, 0])).is_err());
+        let depth = DepthMeters::filled(ImageSize::new(1, 1), 1.0);
+        assert!(FrameCounts::of_where_depth_valid(&mask(&[0, 0]), &mask(&[0, 0]), &depth).is_err());
     }
 }

@@ -353,8 +353,12 @@ mod bonn_crowd {
             }
         }
         let mut tally = SegmentationTally::default();
-        for (mask, reference) in masks.iter().zip(&sequence.reference) {
-            tally.add_masks(mask, reference).unwrap();
+        // Scored where the frame has depth: the reference, built from depth, says nothing
+        // elsewhere.
+        for ((mask, reference), frame) in masks.iter().zip(&sequence.reference).zip(&sequence.frames) {
+            tally
+                .add_masks_where_depth_valid(mask, reference, &frame.depth_m)
+                .unwrap();
         }
         let ate_m = ate(&poses, &sequence.truth_at_color).unwrap().rmse_m;
         let rotation_rpe_30_deg = rpe(&poses, &sequence.truth_at_color, 30)
