@@ -44,12 +44,17 @@ use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 use occmask::trajectory::interpolate;
 use tum::TumSequence;
 
-/// The default config with overrides from the environment (for experiments):
+/// The default detector config with overrides from the environment (for experiments):
 /// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0/1
 /// (appearance growth off/on; the default is off), OCC_GROWTH_PHOTO, OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS,
 /// OCC_GROWTH_MARGIN, OCC_GROWTH_RADIUS, OCC_GROWTH_INHERIT=0/1, OCC_GROWTH_SEEDS=0/1 (its parameters).
 fn detector_config() -> OcclusionConfig {
-    let mut config = OcclusionConfig::default();
+    detector_config_from(OcclusionConfig::default())
+}
+
+/// `base` with the environment's overrides ([`detector_config`]).
+fn detector_config_from(base: OcclusionConfig) -> OcclusionConfig {
+    let mut config = base;
     let get = |name: &str| std::env::var(name).ok().map(|v| v.parse::<usize>().unwrap());
     if let Some(v) = get("OCC_EXIT_MARGIN") {
         config.prune_exit_margin_px = v;
@@ -391,7 +396,7 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics, base: &ProcessorConfig, m
             continue;
         }
         let config = ProcessorConfig {
-            occlusion: detector_config(),
+            occlusion: detector_config_from(base.occlusion),
             mode,
             ..*base
         };
