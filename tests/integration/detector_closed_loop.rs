@@ -118,25 +118,25 @@ fn assert_run_f1(scenario: Scenario, run: &Run, at_least: f64) {
     assert_eq!(run.failures, 0);
 }
 
-/// Measured F1 0.964; bound: the target (0.85).
+/// Measured F1 0.978; bound: the target (0.85).
 #[test]
 fn small_object_crossing() {
     assert_f1(Scenario::SmallObjectCrossing, F1_TARGET);
 }
 
-/// Measured F1 0.907; bound: the target (0.85).
+/// Measured F1 0.937; bound: the target (0.85).
 #[test]
 fn two_objects_crossing() {
     assert_f1(Scenario::TwoObjectsCrossing, F1_TARGET);
 }
 
-/// Measured F1 0.891; bound: the target (0.85).
+/// Measured F1 0.934; bound: the target (0.85).
 #[test]
 fn slow_approach() {
     assert_f1(Scenario::SlowApproach, F1_TARGET);
 }
 
-/// Measured F1 0.962; bound: the target (0.85).
+/// Measured F1 0.977; bound: the target (0.85).
 #[test]
 fn entering_while_panning() {
     assert_f1(Scenario::EnteringWhilePanning, F1_TARGET);
@@ -171,7 +171,7 @@ fn static_control_has_almost_no_false_positives() {
 
 /// The paper's central claim: with a dominant moving object, feeding the mask back into DVO
 /// keeps the pose right, while unmasked DVO is dragged along by the object. Measured closed
-/// loop F1 0.960, RPE(1) 4.0 mm, RPE(30) 81 mm; unmasked RPE(1) 15.6 mm, RPE(30) 485 mm
+/// loop F1 0.982, RPE(1) 4.0 mm, RPE(30) 81 mm; unmasked RPE(1) 15.6 mm, RPE(30) 485 mm
 /// (bound: at most half the unmasked error).
 #[test]
 fn dominant_object_closed_loop_beats_unmasked_dvo() {
