@@ -95,19 +95,26 @@ section_failure_classes() {
   echo "default mode at 320×240: F1 ≥ 0.85 and onset ≤ 5 frames, FP∅ ≤ 0.5 % on the static controls."
   echo "Commands:"
   echo "\`cargo run --release --example scenario_accuracy -- --size 320x240 --scenarios failure,held_out --json F\`"
-  echo "and \`… --size 640x480 --modes dvo_offline --scenarios failure,held_out --json G\`;"
+  echo "and \`… --size 640x480 --modes dvo_offline --scenarios failure,held_out --json G\`; the preset"
+  echo "column: \`… --size 320x240 --modes dvo_offline --scenarios failure,held_out --no-default"
+  echo "--config far_layer=tools/detector_configs/far_layer.json\` (opt-in, method.md D21);"
   echo "\`tests/integration/detector_synthetic.rs\` holds bounds on the default mode at 320×240."
   echo
   "$EX/scenario_accuracy" --size 320x240 --scenarios failure,held_out --json "$WORK/fc_qvga.json" \
     > /dev/null 2>&1
   "$EX/scenario_accuracy" --size 640x480 --modes dvo_offline --scenarios failure,held_out \
     --json "$WORK/fc_vga.json" > /dev/null 2>&1
-  python3 - "$WORK/fc_qvga.json" "$WORK/fc_vga.json" <<'PY'
+  "$EX/scenario_accuracy" --size 320x240 --modes dvo_offline --scenarios failure,held_out \
+    --no-default --config far_layer=tools/detector_configs/far_layer.json \
+    --json "$WORK/fc_far.json" > /dev/null 2>&1
+  python3 - "$WORK/fc_qvga.json" "$WORK/fc_vga.json" "$WORK/fc_far.json" <<'PY'
 import json, sys
 qvga = json.load(open(sys.argv[1]))["runs"]
 vga = json.load(open(sys.argv[2]))["runs"]
+far = json.load(open(sys.argv[3]))["runs"]
 runs = {(r["scenario"], r["mode"], "q"): r for r in qvga}
 runs.update({(r["scenario"], r["mode"], "v"): r for r in vga})
+runs.update({(r["scenario"], r["mode"], "f"): r for r in far})
 order = list(dict.fromkeys(r["scenario"] for r in qvga))
 
 def onset(r):
@@ -134,16 +141,17 @@ def target(r):
     return "**not met** (%s)" % " and ".join(w for w, ok in (("F1", f1_ok), ("onset", onset_ok)) if not ok)
 
 def table(held_out):
-    print("| scenario (class) | offline, DVO (default): F1 (P / R) · onset | same at 640×480: F1 · onset | causal, DVO: F1 · onset | offline, true pose: F1 · onset | causal, true pose: F1 · onset | FP∅ default | ATE default / causal DVO | targets |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| scenario (class) | offline, DVO (default): F1 (P / R) · onset | same at 640×480: F1 · onset | same, far_layer.json: F1 · onset | causal, DVO: F1 · onset | offline, true pose: F1 · onset | causal, true pose: F1 · onset | FP∅ default | ATE default / causal DVO | targets |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in order:
         d = runs[(name, "dvo_offline", "q")]
         if (d["set"] == "held_out") != held_out:
             continue
         seg = d["segmentation"]
         default = "–" if static(d) else "%.3f (%.3f / %.3f) · %s" % (seg["mean_f1"], seg["mean_precision"], seg["mean_recall"], onset(d))
-        print("| %s (%s) | %s | %s | %s | %s | %s | %s | %.1f / %.1f cm | %s |" % (
+        print("| %s (%s) | %s | %s | %s | %s | %s | %s | %s | %.1f / %.1f cm | %s |" % (
             name, d["failure_class"], default, f1_onset(runs[(name, "dvo_offline", "v")]),
+            f1_onset(runs[(name, "dvo_offline", "f")]),
             f1_onset(runs[(name, "dvo_causal", "q")]), f1_onset(runs[(name, "true_pose_offline", "q")]),
             f1_onset(runs[(name, "true_pose_causal", "q")]), fp(d), 100 * d["ate_m"],
             100 * runs[(name, "dvo_causal", "q")]["ate_m"], target(d)))
@@ -261,16 +269,20 @@ section_redkitchen_300() {
   echo "A static kitchen (\$OCCMASK_DATA/7scenes_redkitchen_300; research licence, never copied"
   echo "into the repository), KinectFusion poses, depth-camera intrinsics $KITCHEN. Colour is not"
   echo "registered to depth, so the closed loop's photometric term is misaligned at edges. Commands:"
-  echo "\`cargo run --release --example detector_accuracy -- real|real-dvo DIR $KITCHEN\`."
+  echo "\`cargo run --release --example detector_accuracy -- real|real-dvo DIR $KITCHEN\`; the preset's"
+  echo "row: \`… real-dvo DIR $KITCHEN --modes offline --config tools/detector_configs/far_layer.json\`."
   echo
   local dir="$DATA/7scenes_redkitchen_300"
   if [ ! -d "$dir" ]; then missing 7scenes_redkitchen_300; return; fi
   "$EX/detector_accuracy" real "$dir" $KITCHEN > "$WORK/k_real.txt"
   "$EX/detector_accuracy" real-dvo "$dir" $KITCHEN > "$WORK/k_dvo.txt"
+  "$EX/detector_accuracy" real-dvo "$dir" $KITCHEN --modes offline \
+    --config tools/detector_configs/far_layer.json > "$WORK/k_far.txt"
   echo "| poses | false positives per frame after 5 frames | other |"
   echo "|---|---|---|"
   sed -n 's/.*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %.*motion rejected at \(.*\)/| KinectFusion (ground truth) | mean \1 %, max \2 %, \3 frames above 1 % | motion check rejected frames \4 |/p' "$WORK/k_real.txt"
   sed -n 's/.*(DVO closed loop, \([a-z]*\)).*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %; \(.*\)/| DVO closed loop, \1 | mean \2 %, max \3 %, \4 frames above 1 % | \5 |/p' "$WORK/k_dvo.txt"
+  sed -n 's/.*(DVO closed loop, offline).*FP after warm-up: mean \([0-9.]*\) %, max \([0-9.]*\) %, \([0-9]*\) frames above 1 %; \(.*\)/| DVO closed loop, offline, far_layer.json (D21) | mean \1 %, max \2 %, \3 frames above 1 % | \4 |/p' "$WORK/k_far.txt"
   echo
   echo "The offline mode finds this recording's colour not registered to its depth (D18: registration"
   echo "score 0.87, registered recordings 2.5–2.6) and refines it with the depth term weighted (γ = 10,"
@@ -282,7 +294,7 @@ section_redkitchen_300() {
   echo "0.330 % but 41 frames above 1 %; without the slow-change evidence too, 0.156 % and 5 frames."
   echo "\`--config tools/detector_configs/no_registration_check.json\` refines every recording with the"
   echo "paper's weights; \`--config tools/detector_configs/unregistered_colour.json\` refines every one"
-  echo "as an unregistered one (on Bonn, by `occmask eval` and `reference_masks --score`: ATE 0.0548 m instead of 0.0461 m, F1 0.913 instead of 0.911)."
+  echo "as an unregistered one (on Bonn, by \`occmask eval\` and \`reference_masks --score\`: ATE 0.0548 m instead of 0.0461 m, F1 0.913 instead of 0.911)."
   echo
 }
 
@@ -305,12 +317,13 @@ section_bonn_crowd_200() {
   echo "masks of \`occmask process --export-masks MASKDIR\` against the same reference."
   echo
   if [ ! -d "$DATA/bonn_crowd_200" ]; then missing bonn_crowd_200; return; fi
+  # One thread: the runs print in the order of the tests' names, each line whole.
   OCCMASK_DATA="$DATA" cargo test --release --quiet --test integration detector_real::bonn -- --nocapture \
-    > "$WORK/bonn.txt" 2>&1
+    --test-threads 1 > "$WORK/bonn.txt" 2>&1
   echo "| pose source | mode | ATE RMSE | rotation RPE over 30 frames | mask F1 | precision | recall |"
   echo "|---|---|---|---|---|---|---|"
-  sed -n 's/^bonn_crowd_200 \([A-Za-z]*\) \([A-Za-z]*\): ATE \([0-9.]*\) m, rotation RPE (30 frames) \([0-9.]*\)°, masks F1 \([0-9.]*\) P \([0-9.]*\) R \([0-9.]*\)$/| \1 | \2 | \3 m | \4° | \5 | \6 | \7 |/p' "$WORK/bonn.txt" \
-    | sed 's/| DvoClosedLoop |/| DVO closed loop |/; s/| DvoUnmasked |/| DVO without the mask |/; s/| Offline |/| offline (default) |/; s/| Causal |/| causal (`--causal`) |/'
+  sed -n 's/^.*bonn_crowd_200 \([A-Za-z]*\) \([A-Za-z_.,]*\): ATE \([0-9.]*\) m, rotation RPE (30 frames) \([0-9.]*\)°, masks F1 \([0-9.]*\) P \([0-9.]*\) R \([0-9.]*\)$/| \1 | \2 | \3 m | \4° | \5 | \6 | \7 |/p' "$WORK/bonn.txt" \
+    | sed 's/| DvoClosedLoop |/| DVO closed loop |/; s/| DvoUnmasked |/| DVO without the mask |/; s/| Offline |/| offline (default) |/; s/| Offline,far_layer.json |/| offline, far_layer.json (D21) |/; s/| Causal |/| causal (`--causal`) |/'
   echo
 }
 

@@ -337,4 +337,25 @@ mod tests {
             assert!(ProcessorConfig::from_json(bad).is_err(), "{bad}");
         }
     }
+
+    /// Every preset the docs point `--config` at reads and validates, and changes something.
+    #[test]
+    fn the_presets_in_tools_detector_configs_are_valid() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/detector_configs");
+        let mut presets = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "json") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                let config =
+                    ProcessorConfig::from_json(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                config
+                    .validate()
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                assert_ne!(config, ProcessorConfig::default(), "{}", path.display());
+                presets += 1;
+            }
+        }
+        assert!(presets >= 8, "{presets} presets in {}", dir.display());
+    }
 }

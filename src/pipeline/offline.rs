@@ -80,6 +80,12 @@ pub struct OfflineConfig {
     /// (nearest pixel) to seed the refinement pass's ignore masks. 0 = full resolution. The
     /// first pass's poses and masks only seed the later passes, which run at full resolution.
     pub first_pass_halvings: usize,
+    /// The closed loop's first pass tracks only the far background: its DVO ignores, on each
+    /// reference frame, the pixels nearer than this fraction of that frame's
+    /// [`FAR_LAYER_QUANTILE`] depth, so that an object filling the near view from the first
+    /// frame cannot carry the camera with it. In (0, 1]; `None`: off (the default: on the real
+    /// recordings it costs accuracy, docs/method.md D21). The refinement pass is unchanged.
+    pub first_pass_ignore_nearer_than: Option<f32>,
     /// DVO of the closed loop's refinement pass.
     pub refinement_dvo: DvoConfig,
     /// The refinement pass's DVO runs on a pyramid level whose short side has at least this
@@ -184,6 +190,11 @@ pub const DEFAULT_FIRST_PASS_MIN_SIDE_PX: usize = 120;
 /// 4.9 → 0.8 mm, the object in view at the start 8.5 → 4.5 cm (docs/method.md, D11); VGA input
 /// is unchanged.
 pub const DEFAULT_REFINEMENT_MIN_SIDE_PX: usize = 240;
+/// [`OfflineConfig::first_pass_ignore_nearer_than`] is a fraction of this quantile of a frame's
+/// valid depths: the far background's depth, unmoved by the few farthest pixels (a window, the
+/// noisy rim of the depth image).
+pub const FAR_LAYER_QUANTILE: f64 = 0.9;
+
 /// The first pass is never reduced below this many pixels on its short side: VGA runs at
 /// 320×240, smaller images at full resolution. At 160×120 the detector lost an object resting
 /// and then moving slowly (the synthetic late-onset class at 320×240: F1 0.728 and onset 31
@@ -200,6 +211,7 @@ impl Default for OfflineConfig {
             first_pass_finest_level: DEFAULT_FIRST_PASS_FINEST_LEVEL,
             first_pass_min_side_px: DEFAULT_FIRST_PASS_MIN_SIDE_PX,
             first_pass_halvings: DEFAULT_FIRST_PASS_HALVINGS,
+            first_pass_ignore_nearer_than: None,
             hysteresis_frames: DEFAULT_HYSTERESIS_FRAMES,
             hysteresis_low_fraction: DEFAULT_HYSTERESIS_LOW_FRACTION,
             refinement_min_side_px: DEFAULT_REFINEMENT_MIN_SIDE_PX,
@@ -236,6 +248,15 @@ impl OfflineConfig {
                 value: self.hysteresis_low_fraction.to_string(),
                 expected: "a fraction in (0, 1]".into(),
             });
+        }
+        if let Some(fraction) = self.first_pass_ignore_nearer_than {
+            if !(fraction > 0.0 && fraction <= 1.0) {
+                return Err(Error::InvalidParameter {
+                    name: "offline.first_pass_ignore_nearer_than",
+                    value: fraction.to_string(),
+                    expected: "a fraction in (0, 1], or null".into(),
+                });
+            }
         }
         if let Some(unregistered) = &self.unregistered_colour {
             if !(unregistered.min_score.is_finite() && unregistered.min_score >= 0.0) {
@@ -331,6 +352,17 @@ struct FirstPass {
     /// External poses: the marker's pose in the camera.
     marker_from_camera: Isometry3<f64>,
     min_valid_depth_fraction: f64,
+    /// [`OfflineConfig::first_pass_ignore_nearer_than`] (closed loop only).
+    near_layer: Option<NearLayer>,
+}
+
+/// The near layer that the first pass's DVO ignores on its reference frame.
+struct NearLayer {
+    fraction: f32,
+    /// The previous frame's near pixels (nonzero = near), on the first pass's pixel grid.
+    previous: Mask,
+    /// The valid depths of a frame (the quantile's work buffer).
+    depths_m: Vec<f32>,
 }
 
 /// Passes 2 and 3, and the frames they work on.
@@ -370,6 +402,7 @@ impl OfflineProcessor {
         config.validate()?;
         let offline = config.offline;
         let mut reduced = None;
+        let mut near_layer = None;
         let first = match config.pose_source {
             PoseSource::DvoClosedLoop => {
                 let finest = first_pass_finest_level(&offline, &config.dvo, size);
@@ -382,8 +415,14 @@ impl OfflineProcessor {
                     ..config.dvo
                 };
                 reduced = Reduced::new(size, halvings);
+                let first_size = level_size(size, halvings);
+                near_layer = offline.first_pass_ignore_nearer_than.map(|fraction| NearLayer {
+                    fraction,
+                    previous: Mask::filled(first_size, 0),
+                    depths_m: Vec::with_capacity(first_size.width * first_size.height),
+                });
                 Some(Processor::new(
-                    level_size(size, halvings),
+                    first_size,
                     intrinsics.at_level(halvings as u32),
                     ProcessorConfig {
                         dvo,
@@ -450,6 +489,7 @@ impl OfflineProcessor {
                 source: config.pose_source,
                 marker_from_camera,
                 min_valid_depth_fraction: config.failure.min_valid_depth_fraction,
+                near_layer,
             },
             later: LaterPasses {
                 source: config.pose_source,
@@ -631,9 +671,12 @@ impl FirstPass {
                 let out = first.process(&FrameInput {
                     gray,
                     depth_m,
-                    ignore_in_previous: None,
+                    ignore_in_previous: self.near_layer.as_ref().map(|layer| &layer.previous),
                     ..*frame
                 })?;
+                if let Some(layer) = &mut self.near_layer {
+                    mark_near_layer(depth_m, layer.fraction, &mut layer.depths_m, &mut layer.previous);
+                }
                 buffered.world_from_camera = out.world_from_camera;
                 buffered.first_reset = out.stats.detector_reset;
                 if self.source == PoseSource::DvoClosedLoop {
@@ -809,6 +852,25 @@ impl LaterPasses {
             self.has_previous_seed_mask = true;
         }
         Ok(())
+    }
+}
+
+/// Marks in `near` (nonzero = near) the pixels of `depth_m` with valid depth nearer than
+/// `fraction` × the [`FAR_LAYER_QUANTILE`] of its valid depths; nothing on a frame without
+/// valid depth. `depths_m` is the work buffer.
+fn mark_near_layer(depth_m: &DepthMeters, fraction: f32, depths_m: &mut Vec<f32>, near: &mut Mask) {
+    let is_valid = |z: f32| z > 0.0 && z.is_finite();
+    depths_m.clear();
+    depths_m.extend(depth_m.as_slice().iter().copied().filter(|&z| is_valid(z)));
+    let limit_m = if depths_m.is_empty() {
+        0.0
+    } else {
+        let rank = ((depths_m.len() - 1) as f64 * FAR_LAYER_QUANTILE).round() as usize;
+        let (_, quantile_m, _) = depths_m.select_nth_unstable_by(rank, f32::total_cmp);
+        *quantile_m * fraction
+    };
+    for (n, &z) in near.as_mut_slice().iter_mut().zip(depth_m.as_slice()) {
+        *n = u8::from(is_valid(z) && z < limit_m);
     }
 }
 

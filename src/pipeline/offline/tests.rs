@@ -114,6 +114,60 @@ fn quantize_gray_agrees_with_round() {
 }
 
 #[test]
+fn near_layer_is_the_pixels_nearer_than_a_fraction_of_the_depth_quantile() {
+    // 10 × 12 depths 0.1 m … 10.0 m in a scrambled order, with invalid pixels (0, NaN, ∞) among
+    // them: the 0.9 quantile of the 100 valid ones is their 90th smallest (rank 89 of 0..99).
+    let size = ImageSize::new(10, 12);
+    let mut depth_m = DepthMeters::filled(size, 0.0);
+    for (i, z) in depth_m.as_mut_slice().iter_mut().enumerate() {
+        *z = match i {
+            100..=109 => 0.0,
+            110..=114 => f32::NAN,
+            115..=119 => f32::INFINITY,
+            _ => ((i * 37) % 100 + 1) as f32 * 0.1,
+        };
+    }
+    let mut sorted: Vec<f32> = depth_m.as_slice()[..100].to_vec();
+    sorted.sort_by(f32::total_cmp);
+    let quantile_m = sorted[89];
+    assert!((quantile_m - 9.0).abs() < 1e-5);
+    let (mut depths_m, mut near) = (Vec::new(), Mask::filled(size, 7));
+    for fraction in [0.25_f32, 0.8, 1.0] {
+        mark_near_layer(&depth_m, fraction, &mut depths_m, &mut near);
+        for (i, (&n, &z)) in near.as_slice().iter().zip(depth_m.as_slice()).enumerate() {
+            let expected = i < 100 && z < fraction * quantile_m;
+            assert_eq!(n != 0, expected, "pixel {i}, depth {z} m, fraction {fraction}");
+        }
+        let marked = near.as_slice().iter().filter(|&&n| n != 0).count();
+        assert_eq!(
+            marked,
+            (fraction * 90.0).ceil() as usize - 1,
+            "fraction {fraction}"
+        );
+    }
+    // A frame without valid depth has no near layer.
+    mark_near_layer(&DepthMeters::filled(size, 0.0), 1.0, &mut depths_m, &mut near);
+    assert!(near.as_slice().iter().all(|&n| n == 0));
+}
+
+#[test]
+fn near_layer_fraction_outside_zero_to_one_is_rejected() {
+    for fraction in [0.0, -0.5, 1.5, f32::NAN] {
+        let config = OfflineConfig {
+            first_pass_ignore_nearer_than: Some(fraction),
+            ..OfflineConfig::default()
+        };
+        let err = config.validate().unwrap_err().to_string();
+        assert!(err.contains("offline.first_pass_ignore_nearer_than"), "{err}");
+    }
+    let config = OfflineConfig {
+        first_pass_ignore_nearer_than: Some(1.0),
+        ..OfflineConfig::default()
+    };
+    config.validate().unwrap();
+}
+
+#[test]
 fn enlarged_masks_repeat_each_reduced_pixel_and_cover_odd_sides() {
     let mut reduced = Mask::filled(ImageSize::new(3, 2), 0);
     reduced.as_mut_slice().copy_from_slice(&[1, 0, 2, 0, 3, 0]);

@@ -19,6 +19,12 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The configuration preset `tools/detector_configs/NAME`, as `occmask process --config` reads it.
+pub fn detector_preset(name: &str) -> occmask::pipeline::ProcessorConfig {
+    let path = repo().join("tools/detector_configs").join(name);
+    occmask::pipeline::ProcessorConfig::from_json(&std::fs::read_to_string(&path).unwrap()).unwrap()
+}
+
 /// The LARR fixture folder.
 pub fn larr_fixture() -> PathBuf {
     repo().join("fixtures/larr_fr2_desk_mini")
