@@ -620,11 +620,11 @@ impl OfflineProcessor {
         self.check_registration(None)?;
         let later = &mut self.later;
         later.refine_ready(later.ready.len(), emit)?;
-        while !later.buffer.is_empty() {
-            let n = self.config.block_frames.min(later.buffer.len());
-            later.backward_pass(n)?;
-            later.refine_ready(later.ready.len(), emit)?;
-        }
+        // One backward pass keeps every frame still buffered: block by block, each pass would
+        // start a fresh detector at the same last frame and recompute the later blocks' masks.
+        let n = later.buffer.len();
+        later.backward_pass(n)?;
+        later.refine_ready(later.ready.len(), emit)?;
         if let Some(hysteresis) = &mut later.hysteresis {
             hysteresis.flush(emit)?;
         }

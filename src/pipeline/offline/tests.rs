@@ -49,6 +49,17 @@ fn push(processor: &mut OfflineProcessor, sequence: &SyntheticSequence, i: usize
     processor.push(&input, emit).expect("push");
 }
 
+/// Appends what `out` emits to `emitted`.
+fn record(emitted: &mut Emitted, out: &FrameOutput<'_>) -> Result<()> {
+    emitted.push((
+        out.index,
+        out.timestamp_ns,
+        out.world_from_camera,
+        out.mask.clone(),
+    ));
+    Ok(())
+}
+
 /// Two crossing boxes, offline, on a pool of `threads` threads.
 fn run(threads: usize, frames: usize) -> Emitted {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -58,15 +69,7 @@ fn run(threads: usize, frames: usize) -> Emitted {
     pool.install(|| {
         let (sequence, mut processor) = setup(Scenario::TwoObjectsCrossing, frames);
         let mut emitted = Emitted::new();
-        let mut keep = |out: FrameOutput<'_>| {
-            emitted.push((
-                out.index,
-                out.timestamp_ns,
-                out.world_from_camera,
-                out.mask.clone(),
-            ));
-            Ok(())
-        };
+        let mut keep = |out: FrameOutput<'_>| record(&mut emitted, &out);
         for i in 0..frames {
             push(&mut processor, &sequence, i, &mut keep);
         }
@@ -397,4 +400,42 @@ fn colour_moved_off_the_depth_is_found_not_registered() {
     };
     let processor = OfflineProcessor::new(size, intrinsics, config).expect("valid config");
     assert!(processor.registration.is_none());
+}
+
+#[test]
+fn one_backward_pass_at_the_end_gives_the_masks_of_block_by_block_passes() {
+    // At the end of the sequence every buffered frame is kept from one backward pass; passes
+    // block by block (each from the same last frame) must give the same results. The lengths
+    // cover a buffer of more than one block at the end.
+    let block = short_blocks().block_frames;
+    let mut longer_than_a_block = 0;
+    for frames in 26..=30 {
+        let (sequence, mut one_pass) = setup(Scenario::TwoObjectsCrossing, frames);
+        let (_, mut by_block) = setup(Scenario::TwoObjectsCrossing, frames);
+        let (mut a, mut b) = (Emitted::new(), Emitted::new());
+        for i in 0..frames {
+            push(&mut one_pass, &sequence, i, &mut |out| record(&mut a, &out));
+            push(&mut by_block, &sequence, i, &mut |out| record(&mut b, &out));
+        }
+        longer_than_a_block += usize::from(by_block.later.buffer.len() > block);
+        one_pass.finish(&mut |out| record(&mut a, &out)).expect("finish");
+        let later = &mut by_block.later;
+        let mut emit = |out: FrameOutput<'_>| record(&mut b, &out);
+        later.refine_ready(later.ready.len(), &mut emit).expect("refine");
+        while !later.buffer.is_empty() {
+            later
+                .backward_pass(block.min(later.buffer.len()))
+                .expect("backward");
+            later.refine_ready(later.ready.len(), &mut emit).expect("refine");
+        }
+        if let Some(hysteresis) = &mut later.hysteresis {
+            hysteresis.flush(&mut emit).expect("flush");
+        }
+        assert_eq!(a.len(), frames);
+        assert!(a == b, "{frames} frames: the results differ");
+    }
+    assert!(
+        longer_than_a_block > 0,
+        "no length left more than a block buffered"
+    );
 }
