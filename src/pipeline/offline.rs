@@ -552,7 +552,7 @@ impl OfflineProcessor {
         if check.frames_seen < check.config.frames && !refinement_due {
             return Ok(());
         }
-        let score = median(&mut check.scores);
+        let score = quantile(&mut check.scores, 0.5);
         let registered = score.is_none_or(|score| score >= check.config.min_score);
         if !registered {
             let size = self.later.size;
@@ -862,13 +862,7 @@ fn mark_near_layer(depth_m: &DepthMeters, fraction: f32, depths_m: &mut Vec<f32>
     let is_valid = |z: f32| z > 0.0 && z.is_finite();
     depths_m.clear();
     depths_m.extend(depth_m.as_slice().iter().copied().filter(|&z| is_valid(z)));
-    let limit_m = if depths_m.is_empty() {
-        0.0
-    } else {
-        let rank = ((depths_m.len() - 1) as f64 * FAR_LAYER_QUANTILE).round() as usize;
-        let (_, quantile_m, _) = depths_m.select_nth_unstable_by(rank, f32::total_cmp);
-        *quantile_m * fraction
-    };
+    let limit_m = quantile(depths_m, FAR_LAYER_QUANTILE).map_or(0.0, |far_m| far_m * fraction);
     for (n, &z) in near.as_mut_slice().iter_mut().zip(depth_m.as_slice()) {
         *n = u8::from(is_valid(z) && z < limit_m);
     }
@@ -904,10 +898,11 @@ fn refinement_dvo(offline: &OfflineConfig, dvo: DvoConfig, size: ImageSize) -> D
     DvoConfig { finest_level, ..dvo }
 }
 
-/// The median of `values` (reordered), `None` for none.
-fn median(values: &mut [f32]) -> Option<f32> {
-    values.sort_by(f32::total_cmp);
-    values.get(values.len() / 2).copied()
+/// The `q` quantile of `values` (reordered; the value of rank round((n − 1)·q), so 0.5 is the
+/// upper median), `None` for none.
+fn quantile(values: &mut [f32], q: f64) -> Option<f32> {
+    let rank = ((values.len().checked_sub(1)?) as f64 * q).round() as usize;
+    Some(*values.select_nth_unstable_by(rank, f32::total_cmp).1)
 }
 
 /// `requested` halvings of `size`, fewer where the image would get smaller than
