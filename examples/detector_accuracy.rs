@@ -12,7 +12,7 @@
 //! 7-Scenes frames must not be copied into it).
 //!
 //! The same sequences with the DVO closed loop, offline (the default) and causal:
-//! `cargo run --release --example detector_accuracy -- real-dvo <dir> <fx> <fy> <cx> <cy> [--config FILE]
+//! `cargo run --release --example detector_accuracy -- real-dvo <dir> <fx> <fy> <cx> <cy> [--config FILE] [--dump DIR]
 //! [--modes offline,causal] [--frames]`
 //! prints each mode's false positives and DVO's RPE against the ground truth; `--config` overlays
 //! a partial JSON config on the defaults (as the CLI's), `--frames` prints every frame's fraction.
@@ -34,7 +34,7 @@ use occmask::dataset::DecodedPair;
 use occmask::dvo::DvoStatus;
 use occmask::geometry::PinholeIntrinsics;
 use occmask::image_buf::{DepthMeters, Image, ImageSize, Mask};
-use occmask::metrics::{rpe, FrameCounts, SegmentationTally};
+use occmask::metrics::{ate, rpe, FrameCounts, SegmentationTally};
 use occmask::occlusion::consistency::depth_consistency;
 use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector, OcclusionStats};
 use occmask::pipeline::offline::registration::RegistrationProfile;
@@ -386,7 +386,14 @@ fn probe(dir: &Path, intrinsics: PinholeIntrinsics, first: usize, last: usize) {
 
 /// The DVO closed loop on a real static sequence (gray from the nearest colour image): the
 /// false-positive fraction per frame after the warm-up.
-fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics, base: &ProcessorConfig, modes: &str, per_frame: bool) {
+fn real_dvo(
+    dir: &Path,
+    intrinsics: PinholeIntrinsics,
+    base: &ProcessorConfig,
+    modes: &str,
+    per_frame: bool,
+    dump_dir: Option<&Path>,
+) {
     let sequence = TumSequence::load(dir).unwrap();
     for (mode, label) in [
         (ProcessingMode::Offline, "offline"),
@@ -401,6 +408,7 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics, base: &ProcessorConfig, m
             ..*base
         };
         let mut fractions = Vec::new();
+        let mut masks = Vec::new();
         let (mut not_converged, mut resets, mut rejected) = (0, 0, 0);
         let truth = sequence.groundtruth();
         let (mut estimated, mut reference) = (Vec::new(), Vec::new());
@@ -409,6 +417,9 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics, base: &ProcessorConfig, m
             resets += usize::from(out.stats.detector_reset);
             rejected += usize::from(out.stats.detector.motion_rejected);
             fractions.push(out.stats.moving_fraction);
+            if dump_dir.is_some() {
+                masks.push(out.mask.clone());
+            }
             if let Some(pose) = interpolate(truth, out.timestamp_ns, MAX_GT_GAP_NS) {
                 estimated.push(out.world_from_camera);
                 reference.push(pose);
@@ -439,7 +450,14 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics, base: &ProcessorConfig, m
                 }
             }
         }
+        if let Some(d) = dump_dir {
+            for (i, (pair, mask)) in sequence.depth_with_nearest_color().iter().zip(&masks).enumerate() {
+                let frame = sequence.decode(pair).unwrap();
+                dump_errors(&d.join(format!("{label}_{i:04}.png")), &frame.depth_m, mask, None);
+            }
+        }
         let rpe_1 = rpe(&estimated, &reference, 1).unwrap();
+        let ate_m = ate(&estimated, &reference).unwrap().rmse_m;
         if per_frame {
             for (i, f) in fractions.iter().enumerate() {
                 println!("{label} frame {i:4} FP {:.3} %", 100.0 * f);
@@ -448,7 +466,7 @@ fn real_dvo(dir: &Path, intrinsics: PinholeIntrinsics, base: &ProcessorConfig, m
         let (mean, worst, above) = false_positives_after_warm_up(&fractions);
         println!(
             "{} (DVO closed loop, {label}): {} frames, FP after warm-up: mean {:.3} %, max {:.3} %, {above} frames above 1 %; \
-             DVO RPE Δ=1 vs ground truth {:.4} m, {:.3}° ({} pairs); DVO not converged {not_converged}, pipeline resets {resets}, \
+             DVO RPE Δ=1 vs ground truth {:.4} m, {:.3}° ({} pairs), ATE {ate_m:.4} m; DVO not converged {not_converged}, pipeline resets {resets}, \
              motion check rejections {rejected}",
             dir.display(),
             fractions.len(),
@@ -511,12 +529,17 @@ fn main() {
                 ProcessorConfig::from_json(&std::fs::read_to_string(file).unwrap()).unwrap()
             });
             let modes = option("--modes").unwrap_or_else(|| "offline,causal".into());
+            let dump_dir = option("--dump").map(PathBuf::from);
+            if let Some(d) = &dump_dir {
+                std::fs::create_dir_all(d).unwrap();
+            }
             real_dvo(
                 Path::new(&args[1]),
                 PinholeIntrinsics::new(k[0], k[1], k[2], k[3]),
                 &base,
                 &modes,
                 frames,
+                dump_dir.as_deref(),
             );
         }
         Some("registration") => {

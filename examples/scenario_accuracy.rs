@@ -4,7 +4,7 @@
 //! cargo run --release --example scenario_accuracy -- [--size WxH] [--seed N]
 //!     [--scenarios SET|NAME[,SET|NAME…]]   (SET: original, failure, held_out, every)
 //!     [--modes true_pose_causal,true_pose_offline,dvo_causal,dvo_offline]
-//!     [--config LABEL=FILE]… [--no-default] [--json FILE]
+//!     [--config LABEL=FILE]… [--no-default] [--json FILE] [--colour-shift PX]
 //! ```
 //!
 //! Each scenario is rendered once (at 640×480 about a second per frame) and kept in memory;
@@ -15,6 +15,8 @@
 //! every mode. `tools/detector_configs/` holds the overrides the scenario tables were measured
 //! with (appearance-gated completion on; sub-threshold retention 0.9; both; without the
 //! slow-change evidence of docs/method.md D16, the paper's accumulation alone).
+//! `--colour-shift PX` moves every gray image PX pixels to the right (the left columns repeat
+//! the first one): colour that is not registered to its depth (docs/method.md D18).
 //!
 //! Per run it prints (and with `--json` writes, with every frame's scores and every onset run,
 //! as `occmask::scenario_eval::ScenarioScore`):
@@ -62,6 +64,17 @@ fn scenarios(which: &str) -> Vec<Scenario> {
             name => vec![Scenario::from_name(name).unwrap_or_else(|| panic!("unknown scenario {name}"))],
         })
         .collect()
+}
+
+/// Moves `gray` `shift_px` pixels to the right, repeating its first column on the left.
+fn shift_right(gray: &mut occmask::image_buf::GrayF32, shift_px: usize) {
+    let width = gray.width();
+    for y in 0..gray.height() {
+        for x in (0..width).rev() {
+            let from = x.saturating_sub(shift_px);
+            gray.set(x, y, gray.get(from, y));
+        }
+    }
 }
 
 fn set_name(scenario: Scenario) -> &'static str {
@@ -169,6 +182,7 @@ fn main() {
         }
     }
     let json = value("--json").map(PathBuf::from);
+    let colour_shift_px: Option<usize> = value("--colour-shift").map(|s| s.parse().unwrap());
     println!(
         "# {}×{}, seed {seed}. F1/P/R: means over frames with a moving object. onset: worst over objects and runs (frames from a run's first frame until the object's recall first reaches 0.5) [first_frame:onset per run]. FP∅: largest false-positive fraction on a frame without moving objects from frame 5 on.",
         size.width, size.height
@@ -181,7 +195,12 @@ fn main() {
             ..SequenceConfig::default()
         };
         let started = std::time::Instant::now();
-        let rendered = RenderedSequence::render(&SyntheticSequence::new(scenario, config));
+        let mut rendered = RenderedSequence::render(&SyntheticSequence::new(scenario, config));
+        if let Some(shift_px) = colour_shift_px {
+            for frame in &mut rendered.frames {
+                shift_right(&mut frame.gray, shift_px);
+            }
+        }
         eprintln!(
             "{}: {} frames rendered in {:.0} s",
             scenario.name(),

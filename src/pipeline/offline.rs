@@ -138,21 +138,14 @@ pub const DEFAULT_REGISTRATION_FRAMES: usize = DEFAULT_BLOCK_FRAMES + DEFAULT_LO
 /// first 90 frames decides the same on the real recordings (medians: TUM fr2_desk 2.6, the Bonn
 /// crowd 2.5, 7-Scenes 0.87 against 0.90 from all 90).
 pub const REGISTRATION_FRAME_STRIDE: usize = 3;
-/// Default refinement weights on unregistered colour: the depth term weighted (γ 10, k_Z 5 cm).
-pub const UNREGISTERED_DEPTH_WEIGHT_GAMMA: f32 = 10.0;
-/// See [`UNREGISTERED_DEPTH_WEIGHT_GAMMA`].
-pub const UNREGISTERED_K_DEPTH_M: f32 = 0.05;
-
 impl Default for UnregisteredColourConfig {
     fn default() -> Self {
         Self {
             min_score: DEFAULT_MIN_REGISTRATION_SCORE,
             frames: DEFAULT_REGISTRATION_FRAMES,
-            refinement_dvo: DvoConfig {
-                depth_weight_gamma: UNREGISTERED_DEPTH_WEIGHT_GAMMA,
-                k_depth_m: UNREGISTERED_K_DEPTH_M,
-                ..OfflineConfig::paper_refinement_dvo()
-            },
+            // The causal closed loop's own DVO: the depth term weighted and keyframes while nothing
+            // moves (docs/method.md D18).
+            refinement_dvo: DvoConfig::closed_loop(),
             hysteresis_frames: 0,
         }
     }
