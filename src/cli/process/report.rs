@@ -67,7 +67,7 @@ pub(super) fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> 
     if let Some(r) = rep.colour_registration.filter(|r| !r.registered) {
         out.push(format!(
             "{}: colour not registered to depth (registration score {:.2}, below {:.2}): the \
-             offline refinement weighted the depth and left out the temporal hysteresis \
+             offline refinement used the causal closed loop's depth-weighted DVO and no temporal hysteresis \
              (docs/method.md D18; `--config tools/detector_configs/no_registration_check.json` \
              turns the check off)",
             input.display(),
