@@ -4,7 +4,7 @@
 //! cargo run --release --example scenario_accuracy -- [--size WxH] [--seed N]
 //!     [--scenarios SET|NAME[,SET|NAME…]]   (SET: original, failure, held_out, every)
 //!     [--modes true_pose_causal,true_pose_offline,dvo_causal,dvo_offline]
-//!     [--config LABEL=FILE]… [--no-default] [--json FILE] [--colour-shift PX]
+//!     [--config LABEL=FILE]… [--no-default] [--json FILE] [--colour-shift PX] [--dump DIR]
 //! ```
 //!
 //! Each scenario is rendered once (at 640×480 about a second per frame) and kept in memory;
@@ -17,6 +17,8 @@
 //! slow-change evidence of docs/method.md D16, the paper's accumulation alone).
 //! `--colour-shift PX` moves every gray image PX pixels to the right (the left columns repeat
 //! the first one): colour that is not registered to its depth (docs/method.md D18).
+//! `--dump DIR` writes every frame of every run as `DIR/<scenario>_<mode>_<config>_<frame>.png`:
+//! gray, true positives green, false positives red, misses blue.
 //!
 //! Per run it prints (and with `--json` writes, with every frame's scores and every onset run,
 //! as `occmask::scenario_eval::ScenarioScore`):
@@ -38,8 +40,9 @@
 use std::path::PathBuf;
 
 use occmask::image_buf::ImageSize;
+use occmask::image_buf::Mask;
 use occmask::pipeline::ProcessorConfig;
-use occmask::scenario_eval::{evaluate, EvalMode, RenderedSequence, ScenarioScore};
+use occmask::scenario_eval::{evaluate_observed, EvalMode, RenderedFrame, RenderedSequence, ScenarioScore};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 use serde::Serialize;
 
@@ -75,6 +78,25 @@ fn shift_right(gray: &mut occmask::image_buf::GrayF32, shift_px: usize) {
             gray.set(x, y, gray.get(from, y));
         }
     }
+}
+
+/// The frame's gray with the mask's true positives green, false positives red and misses blue.
+fn write_overlay(path: &std::path::Path, frame: &RenderedFrame, mask: &Mask) {
+    let (width, height) = (frame.gray.width(), frame.gray.height());
+    let mut out = image::RgbImage::new(width as u32, height as u32);
+    for y in 0..height {
+        for x in 0..width {
+            let g = (255.0 * frame.gray.get(x, y).clamp(0.0, 1.0)) as u8;
+            let p = match (mask.get(x, y) != 0, frame.gt_mask.get(x, y) != 0) {
+                (true, true) => [g / 3, 255, g / 3],
+                (true, false) => [255, g / 3, g / 3],
+                (false, true) => [g / 3, g / 3, 255],
+                (false, false) => [g, g, g],
+            };
+            out.put_pixel(x as u32, y as u32, image::Rgb(p));
+        }
+    }
+    out.save(path).unwrap();
 }
 
 fn set_name(scenario: Scenario) -> &'static str {
@@ -183,6 +205,10 @@ fn main() {
     }
     let json = value("--json").map(PathBuf::from);
     let colour_shift_px: Option<usize> = value("--colour-shift").map(|s| s.parse().unwrap());
+    let dump_dir = value("--dump").map(PathBuf::from);
+    if let Some(dir) = &dump_dir {
+        std::fs::create_dir_all(dir).unwrap();
+    }
     println!(
         "# {}×{}, seed {seed}. F1/P/R: means over frames with a moving object. onset: worst over objects and runs (frames from a run's first frame until the object's recall first reaches 0.5) [first_frame:onset per run]. FP∅: largest false-positive fraction on a frame without moving objects from frame 5 on.",
         size.width, size.height
@@ -209,7 +235,13 @@ fn main() {
         );
         for &mode in &modes {
             for (c, (label, processor_config)) in configs.iter().enumerate() {
-                let score = evaluate(&rendered, mode, processor_config).unwrap();
+                let mut observe = |i: usize, mask: &Mask| {
+                    if let Some(dir) = &dump_dir {
+                        let name = format!("{}_{}_{label}_{i:04}.png", scenario.name(), mode.name());
+                        write_overlay(&dir.join(name), &rendered.frames[i], mask);
+                    }
+                };
+                let score = evaluate_observed(&rendered, mode, processor_config, &mut observe).unwrap();
                 print_run(scenario, label, &score);
                 scores.push((scenario, c, score));
             }

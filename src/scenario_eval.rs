@@ -288,6 +288,20 @@ pub fn evaluate(
     mode: EvalMode,
     config: &ProcessorConfig,
 ) -> Result<ScenarioScore> {
+    evaluate_observed(sequence, mode, config, &mut |_, _| {})
+}
+
+/// [`evaluate`], handing every frame's output mask to `observe` (with the frame's index) as it
+/// is scored.
+///
+/// # Errors
+/// Whatever the pipeline returns (invalid parameters).
+pub fn evaluate_observed(
+    sequence: &RenderedSequence,
+    mode: EvalMode,
+    config: &ProcessorConfig,
+    observe: &mut (dyn FnMut(usize, &Mask) + Send),
+) -> Result<ScenarioScore> {
     let config = ProcessorConfig {
         pose_source: mode.pose_source(),
         ..*config
@@ -308,7 +322,10 @@ pub fn evaluate(
     let started = Instant::now();
     if mode.offline() {
         let mut processor = OfflineProcessor::new(sequence.size, sequence.intrinsics, config)?;
-        let mut emit = |out: FrameOutput<'_>| scorer.add(&out);
+        let mut emit = |out: FrameOutput<'_>| {
+            observe(scorer.per_frame.len(), out.mask);
+            scorer.add(&out)
+        };
         for f in &sequence.frames {
             let frame = input(f, external);
             processor.push(&frame, &mut emit)?;
@@ -319,6 +336,7 @@ pub fn evaluate(
         for f in &sequence.frames {
             let frame = input(f, external);
             let out = processor.process(&frame)?;
+            observe(scorer.per_frame.len(), out.mask);
             scorer.add(&out)?;
         }
     }

@@ -55,6 +55,11 @@ pub struct SlowEvidenceConfig {
     /// Remove the ΔZ that the frame's camera-motion error causes (fitted over the background)
     /// from W before it is thresholded.
     pub motion_error_correction: bool,
+    /// An occlusion event (ΔZ > τ_α, A's in the paper) also enters W, capped at τ_α, unless the
+    /// warp's source lies at a depth edge of the previous frame (docs/method.md D22): an object
+    /// whose leading edge uncovers less than the object size per frame then still adds up.
+    /// `false`: W is reset there, as A alone handles the event.
+    pub occlusion_events: bool,
 }
 
 impl Default for SlowEvidenceConfig {
@@ -65,6 +70,7 @@ impl Default for SlowEvidenceConfig {
             opening_radius_px: 1,
             min_object_pixels_vga: 500,
             motion_error_correction: true,
+            occlusion_events: true,
         }
     }
 }

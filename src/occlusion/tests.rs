@@ -939,3 +939,53 @@ fn slow_evidence_is_left_out_below_240_rows() {
     assert_eq!(qvga.config().slow_evidence, Some(SlowEvidenceConfig::default()));
     assert!(qvga.slow_evidence_m().is_some());
 }
+
+#[test]
+fn an_occlusion_event_enters_w_capped_at_tau_alpha_unless_its_source_is_at_a_depth_edge() {
+    // A box at 2 m in front of a wall at 3 m widens by 3 columns to the right between two frames
+    // (identity motion): the new columns are occlusion events (ΔZ = 1 m > τ_α). Column 140
+    // samples the wall beside the box's old edge (a depth edge), 141 and 142 the smooth wall.
+    let size = ImageSize::new(320, 240);
+    let k = PinholeIntrinsics::new(262.5, 262.5, 159.5, 119.5);
+    let scene = |x1: usize| {
+        Image::from_fn(size, move |x, y| {
+            if (100..x1).contains(&x) && (80..160).contains(&y) {
+                2.0
+            } else {
+                3.0
+            }
+        })
+    };
+    let (before, after) = (scene(140), scene(143));
+    for reference_transport in [false, true] {
+        for events in [true, false] {
+            let config = OcclusionConfig {
+                slow_evidence: Some(SlowEvidenceConfig {
+                    occlusion_events: events,
+                    ..SlowEvidenceConfig::default()
+                }),
+                ..OcclusionConfig::default()
+            };
+            let mut detector = OcclusionDetector::new(size, k, config).unwrap();
+            detector.reference_transport = reference_transport;
+            detector.update(&before, &Isometry3::identity()).unwrap();
+            detector.update(&after, &Isometry3::identity()).unwrap();
+            let w = detector.slow_evidence_m().unwrap();
+            let tau_alpha = config.threshold(config.alpha, 2.0);
+            for y in 80..160 {
+                assert_eq!(w.get(140, y), 0.0, "source at the depth edge, row {y}");
+                for x in [141, 142] {
+                    let expected = if events { tau_alpha } else { 0.0 };
+                    assert!(
+                        (w.get(x, y) - expected).abs() < 1e-6,
+                        "events {events}, reference {reference_transport}: W({x}, {y}) = {}",
+                        w.get(x, y)
+                    );
+                }
+                // The box's old columns and the wall saw no change.
+                assert_eq!(w.get(120, y), 0.0);
+            }
+            assert_eq!(w.get(200, 120), 0.0);
+        }
+    }
+}

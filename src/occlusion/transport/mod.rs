@@ -256,6 +256,10 @@ struct SlowRow<'a> {
     row: &'a mut [f32],
     /// W's own (geometric) warp of the row: sources and z′; None = the row's warp is it.
     own_warp: Option<(&'a [u32], &'a [f32])>,
+    /// Occlusion events (ΔZ > τ_α) enter W ([`crate::occlusion::SlowEvidenceConfig::occlusion_events`]).
+    events: bool,
+    /// Image width (px), for the neighbours of a source pixel.
+    width: usize,
 }
 
 /// Counts of one row.
@@ -411,8 +415,46 @@ fn slow_update(
         zc_row,
         slow_dz,
         &carried_w[..len],
-        &mut slow.row[range],
+        slow.events,
+        &mut slow.row[range.clone()],
     );
+    if slow.events {
+        // Rare pixels (an occlusion event): those whose source lies at a depth edge leave W.
+        let w_row = &mut slow.row[range];
+        for (i, w) in w_row.iter_mut().enumerate() {
+            let zc = zc_row[i];
+            let z_or_one = if finish.quadratic { zc } else { 1.0 };
+            let event = slow_dz[i] > finish.alpha * zc * z_or_one;
+            if event && *w != 0.0 && source_at_depth_edge(previous_zc, slow.width, slow_sources[i]) {
+                *w = 0.0;
+            }
+        }
+    }
+}
+
+/// A 4-neighbour of a source pixel whose depth differs from the source's by more than this
+/// fraction of it (or that has no depth, or lies outside the image) puts the source at a depth
+/// edge, where sampling one pixel off turns a static surface into an occlusion event.
+pub(super) const EVENT_EDGE_STEP: f32 = 0.1;
+
+/// Whether the previous frame's pixel `source` ([`NO_SOURCE`]: no warp) lies at a depth edge of
+/// `previous_zc` (see [`EVENT_EDGE_STEP`]).
+pub(super) fn source_at_depth_edge(previous_zc: &[f32], width: usize, source: u32) -> bool {
+    if source == NO_SOURCE {
+        return true;
+    }
+    let s = source as usize;
+    let (x, z) = (s % width, previous_zc[s]);
+    let limit = EVENT_EDGE_STEP * z;
+    let neighbours = [
+        (x > 0).then(|| s - 1),
+        (x + 1 < width).then_some(s + 1),
+        s.checked_sub(width),
+        Some(s + width).filter(|&n| n < previous_zc.len()),
+    ];
+    !neighbours
+        .iter()
+        .all(|n| n.is_some_and(|n| previous_zc[n] > 0.0 && (previous_zc[n] - z).abs() < limit))
 }
 
 /// Steps 3–8 on one block (f32 only; every slice a separate argument so the compiler knows
@@ -565,9 +607,9 @@ simd_kernel!(
     (sources: &[u32], previous_zc: &[f32], measured: &[f32], qz: &[f32], delta: &mut [f32])
 );
 
-/// W of one block: retention · Ŵ + ΔZ where the pixel was warped, the background did not
-/// reappear (ΔZ > −τ_β) and nothing moved in front of it at once (ΔZ ≤ τ_α: an occlusion
-/// event is A's), else 0.
+/// W of one block: retention · Ŵ + min(ΔZ, τ_α) where the pixel was warped, the background
+/// did not reappear (ΔZ > −τ_β) and, unless `events`, nothing moved in front of it at once
+/// (ΔZ ≤ τ_α: the paper leaves an occlusion event to A), else 0.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn slow_block_generic(
@@ -579,6 +621,7 @@ fn slow_block_generic(
     zc_row: &[f32],
     dz_row: &[f32],
     carried_w: &[f32],
+    events: bool,
     w_row: &mut [f32],
 ) {
     let len = w_row.len();
@@ -588,9 +631,9 @@ fn slow_block_generic(
         let z_or_one = if quadratic { zc_row[i] } else { 1.0 };
         let tau_alpha = alpha * zc_row[i] * z_or_one;
         let tau_beta = beta * zc_row[i] * z_or_one;
-        let keep = (sources[i] != NO_SOURCE) & (dz_row[i] > -tau_beta) & (dz_row[i] <= tau_alpha);
+        let keep = (sources[i] != NO_SOURCE) & (dz_row[i] > -tau_beta) & (events | (dz_row[i] <= tau_alpha));
         w_row[i] = if keep {
-            retention * carried_w[i] + dz_row[i]
+            retention * carried_w[i] + dz_row[i].min(tau_alpha)
         } else {
             0.0
         };
@@ -610,6 +653,7 @@ simd_kernel!(
         zc_row: &[f32],
         dz_row: &[f32],
         carried_w: &[f32],
+        events: bool,
         w_row: &mut [f32]
     )
 );

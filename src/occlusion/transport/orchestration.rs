@@ -83,8 +83,10 @@ pub struct TransportOutputs<'a> {
     pub newly_discovered: &'a mut Image<u8>,
     /// 1 where A > τ_α (the object set O₀), else 0; one entry per pixel.
     pub object_set: &'a mut [u8],
-    /// W = retention · Ŵ + ΔZ where the warp is valid and the background did not reappear
-    /// (ΔZ > −τ_β), else 0 (m), when [`TransportInputs::slow_previous`] is given.
+    /// W = retention · Ŵ + min(ΔZ, τ_α) where the warp is valid, the background did not
+    /// reappear (ΔZ > −τ_β) and ΔZ ≤ τ_α or, with
+    /// [`crate::occlusion::SlowEvidenceConfig::occlusion_events`], the warp's source is off a
+    /// depth edge; else 0 (m), when [`TransportInputs::slow_previous`] is given.
     pub slow_m: Option<&'a mut DepthMeters>,
 }
 
@@ -186,6 +188,7 @@ pub fn transport_with(
         .slow_previous
         .filter(|_| outputs.slow_m.is_some())
         .map(|(w, retention)| (&w.as_slice()[..area], retention));
+    let slow_events = inputs.config.slow_evidence.is_some_and(|c| c.occlusion_events);
     let (slow_buffer, slow_chunk) = match outputs.slow_m {
         Some(slow_m) if slow_previous.is_some() => (slow_m.as_mut_slice(), chunk),
         _ => (&mut scratch.no_slow_rows[..], 1),
@@ -263,6 +266,8 @@ pub fn transport_with(
                         retention,
                         row: &mut slow_rows[row * width..(row + 1) * width],
                         own_warp: slow_warp.is_some().then_some((&*slow_source_row, &*slow_qz_row)),
+                        events: slow_events,
+                        width,
                     });
                     // Pass 1: the warp source of every pixel; the ΔZ row holds z′ until pass 2
                     // reads it.

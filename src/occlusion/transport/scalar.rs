@@ -2,7 +2,9 @@
 
 use nalgebra::Point3;
 
-use super::{PixelBounds, TransportCounts, TransportInputs, TransportOutputs};
+use super::{
+    source_at_depth_edge, PixelBounds, TransportCounts, TransportInputs, TransportOutputs, NO_SOURCE,
+};
 use crate::occlusion::WarpDepth;
 
 /// The scalar reference's warp field: per pixel the nearest previous pixel (None when invalid)
@@ -83,11 +85,19 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutp
                 // Unmeasured: the release's comparison, which is 0 (compensated = sampled).
                 _ => 0.0,
             };
+            let tau_alpha = config.threshold(config.alpha, compensated);
+            let events = config.slow_evidence.is_some_and(|c| c.occlusion_events);
+            let source = slow_source.map_or(NO_SOURCE, |n| n as u32);
             let value = if slow_source.is_some()
                 && delta_z > -config.threshold(config.beta, compensated)
-                && delta_z <= config.threshold(config.alpha, compensated)
-            {
-                retention * carried_w + delta_z
+                && (delta_z <= tau_alpha
+                    || (events
+                        && !source_at_depth_edge(
+                            inputs.compensated_previous_m.as_slice(),
+                            inputs.compensated_previous_m.width(),
+                            source,
+                        ))) {
+                retention * carried_w + delta_z.min(tau_alpha)
             } else {
                 0.0
             };
