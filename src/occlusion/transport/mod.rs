@@ -405,7 +405,7 @@ fn slow_update(
         }
     };
     gather_slow_block(simd, slow_sources, slow.previous, &mut carried_w[..len]);
-    slow_block(
+    let kept_events = slow_block(
         simd,
         slow_sources,
         finish.alpha,
@@ -418,7 +418,7 @@ fn slow_update(
         slow.events,
         &mut slow.row[range.clone()],
     );
-    if slow.events {
+    if kept_events > 0 {
         // Rare pixels (an occlusion event): those whose source lies at a depth edge leave W.
         let w_row = &mut slow.row[range];
         for (i, w) in w_row.iter_mut().enumerate() {
@@ -609,7 +609,8 @@ simd_kernel!(
 
 /// W of one block: retention · Ŵ + min(ΔZ, τ_α) where the pixel was warped, the background
 /// did not reappear (ΔZ > −τ_β) and, unless `events`, nothing moved in front of it at once
-/// (ΔZ ≤ τ_α: the paper leaves an occlusion event to A), else 0.
+/// (ΔZ ≤ τ_α: the paper leaves an occlusion event to A), else 0. Returns the occlusion events
+/// kept in W.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn slow_block_generic(
@@ -623,10 +624,11 @@ fn slow_block_generic(
     carried_w: &[f32],
     events: bool,
     w_row: &mut [f32],
-) {
+) -> u32 {
     let len = w_row.len();
     let (sources, zc_row, dz_row, carried_w) =
         (&sources[..len], &zc_row[..len], &dz_row[..len], &carried_w[..len]);
+    let mut kept_events = 0;
     for i in 0..len {
         let z_or_one = if quadratic { zc_row[i] } else { 1.0 };
         let tau_alpha = alpha * zc_row[i] * z_or_one;
@@ -637,7 +639,9 @@ fn slow_block_generic(
         } else {
             0.0
         };
+        kept_events += u32::from(keep & (dz_row[i] > tau_alpha));
     }
+    kept_events
 }
 
 simd_kernel!(
@@ -655,7 +659,7 @@ simd_kernel!(
         carried_w: &[f32],
         events: bool,
         w_row: &mut [f32]
-    )
+    ) -> u32
 );
 
 /// O₀ of one block: 1 where A > τ_α, else 0. Returns the object pixels.
