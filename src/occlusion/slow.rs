@@ -6,8 +6,10 @@
 //! than τ_α per frame is cleared every frame: an object approaching head-on (a person walking
 //! towards the camera: 2–3 cm per frame against τ_α ≈ 0.5 m at 3.5 m) or one that covers a
 //! surface just behind it (a box sliding on a desk) is never found. W keeps a leaky sum of ΔZ
-//! beside A: W ← retention · Ŵ + ΔZ, carried by the same warp, reset where the background
-//! reappears (ΔZ ≤ −τ_β) or the warp is invalid. For a static surface ΔZ telescopes (the sum is
+//! beside A: W ← retention · Ŵ + min(ΔZ, τ_α), carried by the same warp, reset where the
+//! background reappears (ΔZ ≤ −τ_β), the warp is invalid, or an occlusion event (ΔZ > τ_α)
+//! samples a depth edge of the previous frame (D22; without
+//! [`SlowEvidenceConfig::occlusion_events`], at every occlusion event). For a static surface ΔZ telescopes (the sum is
 //! the depth difference between the first and the last frame along the warp chain), so W stays
 //! within the sensor noise; a steady approach adds up to its speed / (1 − retention).
 //!
