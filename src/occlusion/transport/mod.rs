@@ -258,11 +258,8 @@ struct SlowRow<'a> {
     own_warp: Option<(&'a [u32], &'a [f32])>,
     /// Occlusion events (ΔZ > τ_α) enter W ([`crate::occlusion::SlowEvidenceConfig::occlusion_events`]).
     events: bool,
-    /// Image width (px), for the neighbours of a pixel.
+    /// Image width (px), for the neighbours of a source pixel.
     width: usize,
-    /// The current frame's measured depth (whole image, m) and the row's index in it.
-    current_m: &'a [f32],
-    y: usize,
 }
 
 /// Counts of one row.
@@ -422,49 +419,42 @@ fn slow_update(
         &mut slow.row[range.clone()],
     );
     if kept_events > 0 {
-        // Rare pixels (an occlusion event): those at a depth edge of the current frame whose
-        // source lies at one of the previous frame leave W.
-        let w_row = &mut slow.row[range.clone()];
+        // Rare pixels (an occlusion event): those whose source lies at a depth edge leave W.
+        let w_row = &mut slow.row[range];
         for (i, w) in w_row.iter_mut().enumerate() {
             let zc = zc_row[i];
             let z_or_one = if finish.quadratic { zc } else { 1.0 };
             let event = slow_dz[i] > finish.alpha * zc * z_or_one;
-            let pixel = (slow.y * slow.width + range.start + i) as u32;
-            if event
-                && *w != 0.0
-                && at_depth_edge(previous_zc, slow.width, slow_sources[i])
-                && at_depth_edge(slow.current_m, slow.width, pixel)
-            {
+            if event && *w != 0.0 && source_at_depth_edge(previous_zc, slow.width, slow_sources[i]) {
                 *w = 0.0;
             }
         }
     }
 }
 
-/// A 4-neighbour of a pixel whose depth differs from the pixel's by more than this fraction of
-/// it (or that has no depth, or lies outside the image) puts the pixel at a depth edge. An
-/// occlusion event at a depth edge of the current frame whose warp source lies at one of the
-/// previous frame is what sampling one pixel off a static edge gives.
+/// A 4-neighbour of a source pixel whose depth differs from the source's by more than this
+/// fraction of it (or that has no depth, or lies outside the image) puts the source at a depth
+/// edge, where sampling one pixel off turns a static surface into an occlusion event.
 pub(super) const EVENT_EDGE_STEP: f32 = 0.1;
 
-/// Whether `pixel` (row-major index; [`NO_SOURCE`]: none) lies at a depth edge of `depth_m`
-/// (see [`EVENT_EDGE_STEP`]).
-pub(super) fn at_depth_edge(depth_m: &[f32], width: usize, pixel: u32) -> bool {
-    if pixel == NO_SOURCE {
+/// Whether the previous frame's pixel `source` ([`NO_SOURCE`]: no warp) lies at a depth edge of
+/// `previous_zc` (see [`EVENT_EDGE_STEP`]).
+pub(super) fn source_at_depth_edge(previous_zc: &[f32], width: usize, source: u32) -> bool {
+    if source == NO_SOURCE {
         return true;
     }
-    let s = pixel as usize;
-    let (x, z) = (s % width, depth_m[s]);
+    let s = source as usize;
+    let (x, z) = (s % width, previous_zc[s]);
     let limit = EVENT_EDGE_STEP * z;
     let neighbours = [
         (x > 0).then(|| s - 1),
         (x + 1 < width).then_some(s + 1),
         s.checked_sub(width),
-        Some(s + width).filter(|&n| n < depth_m.len()),
+        Some(s + width).filter(|&n| n < previous_zc.len()),
     ];
     !neighbours
         .iter()
-        .all(|n| n.is_some_and(|n| depth_m[n] > 0.0 && (depth_m[n] - z).abs() < limit))
+        .all(|n| n.is_some_and(|n| previous_zc[n] > 0.0 && (previous_zc[n] - z).abs() < limit))
 }
 
 /// Steps 3–8 on one block (f32 only; every slice a separate argument so the compiler knows

@@ -85,9 +85,8 @@ pub struct TransportOutputs<'a> {
     pub object_set: &'a mut [u8],
     /// W = retention · Ŵ + min(ΔZ, τ_α) where the warp is valid, the background did not
     /// reappear (ΔZ > −τ_β) and ΔZ ≤ τ_α or, with
-    /// [`crate::occlusion::SlowEvidenceConfig::occlusion_events`], the pixel and its warp's
-    /// source do not both lie at depth edges; else 0 (m), when [`TransportInputs::slow_previous`]
-    /// is given.
+    /// [`crate::occlusion::SlowEvidenceConfig::occlusion_events`], the warp's source is off a
+    /// depth edge; else 0 (m), when [`TransportInputs::slow_previous`] is given.
     pub slow_m: Option<&'a mut DepthMeters>,
 }
 
@@ -269,8 +268,6 @@ pub fn transport_with(
                         own_warp: slow_warp.is_some().then_some((&*slow_source_row, &*slow_qz_row)),
                         events: slow_events,
                         width,
-                        current_m: inputs.depth_m.as_slice(),
-                        y,
                     });
                     // Pass 1: the warp source of every pixel; the ΔZ row holds z′ until pass 2
                     // reads it.

@@ -2,7 +2,9 @@
 
 use nalgebra::Point3;
 
-use super::{at_depth_edge, PixelBounds, TransportCounts, TransportInputs, TransportOutputs, NO_SOURCE};
+use super::{
+    source_at_depth_edge, PixelBounds, TransportCounts, TransportInputs, TransportOutputs, NO_SOURCE,
+};
 use crate::occlusion::WarpDepth;
 
 /// The scalar reference's warp field: per pixel the nearest previous pixel (None when invalid)
@@ -90,15 +92,11 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutp
                 && delta_z > -config.threshold(config.beta, compensated)
                 && (delta_z <= tau_alpha
                     || (events
-                        && !(at_depth_edge(
+                        && !source_at_depth_edge(
                             inputs.compensated_previous_m.as_slice(),
                             inputs.compensated_previous_m.width(),
                             source,
-                        ) && at_depth_edge(
-                            inputs.depth_m.as_slice(),
-                            inputs.depth_m.width(),
-                            (y * inputs.depth_m.width() + x) as u32,
-                        )))) {
+                        ))) {
                 retention * carried_w + delta_z.min(tau_alpha)
             } else {
                 0.0
