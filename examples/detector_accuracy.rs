@@ -27,6 +27,9 @@
 #[path = "../tests/integration/common/tum.rs"]
 mod tum;
 
+#[path = "shared/overlay.rs"]
+mod overlay;
+
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
@@ -137,12 +140,7 @@ fn dump_errors(path: &Path, depth: &DepthMeters, mask: &Mask, truth: Option<&Mas
             } else {
                 0
             };
-            let p = match (mask.get(x, y) != 0, truth.is_some_and(|t| t.get(x, y) != 0)) {
-                (true, true) => [g / 3, 255, g / 3],
-                (true, false) => [255, g / 3, g / 3],
-                (false, true) => [g / 3, g / 3, 255],
-                (false, false) => [g, g, g],
-            };
+            let p = overlay::error_colour(g, mask.get(x, y) != 0, truth.is_some_and(|t| t.get(x, y) != 0));
             out.put_pixel(x as u32, y as u32, image::Rgb(p));
         }
     }

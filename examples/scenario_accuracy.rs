@@ -37,6 +37,9 @@
 // A measurement tool: a failing setup is a bug worth a panic.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+#[path = "shared/overlay.rs"]
+mod overlay;
+
 use std::path::PathBuf;
 
 use occmask::image_buf::ImageSize;
@@ -87,12 +90,7 @@ fn write_overlay(path: &std::path::Path, frame: &RenderedFrame, mask: &Mask) {
     for y in 0..height {
         for x in 0..width {
             let g = (255.0 * frame.gray.get(x, y).clamp(0.0, 1.0)) as u8;
-            let p = match (mask.get(x, y) != 0, frame.gt_mask.get(x, y) != 0) {
-                (true, true) => [g / 3, 255, g / 3],
-                (true, false) => [255, g / 3, g / 3],
-                (false, true) => [g / 3, g / 3, 255],
-                (false, false) => [g, g, g],
-            };
+            let p = overlay::error_colour(g, mask.get(x, y) != 0, frame.gt_mask.get(x, y) != 0);
             out.put_pixel(x as u32, y as u32, image::Rgb(p));
         }
     }
