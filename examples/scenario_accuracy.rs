@@ -42,8 +42,7 @@ mod overlay;
 
 use std::path::PathBuf;
 
-use occmask::image_buf::ImageSize;
-use occmask::image_buf::Mask;
+use occmask::image_buf::{GrayF32, ImageSize, Mask};
 use occmask::pipeline::ProcessorConfig;
 use occmask::scenario_eval::{evaluate_observed, EvalMode, RenderedFrame, RenderedSequence, ScenarioScore};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
@@ -73,7 +72,7 @@ fn scenarios(which: &str) -> Vec<Scenario> {
 }
 
 /// Moves `gray` `shift_px` pixels to the right, repeating its first column on the left.
-fn shift_right(gray: &mut occmask::image_buf::GrayF32, shift_px: usize) {
+fn shift_right(gray: &mut GrayF32, shift_px: usize) {
     let width = gray.width();
     for y in 0..gray.height() {
         for x in (0..width).rev() {

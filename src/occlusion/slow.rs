@@ -9,9 +9,10 @@
 //! beside A: W ← retention · Ŵ + min(ΔZ, τ_α), carried by the same warp, reset where the
 //! background reappears (ΔZ ≤ −τ_β), the warp is invalid, or an occlusion event (ΔZ > τ_α)
 //! samples a depth edge of the previous frame (D22; without
-//! [`SlowEvidenceConfig::occlusion_events`], at every occlusion event). For a static surface ΔZ telescopes (the sum is
-//! the depth difference between the first and the last frame along the warp chain), so W stays
-//! within the sensor noise; a steady approach adds up to its speed / (1 − retention).
+//! [`SlowEvidenceConfig::occlusion_events`], at every occlusion event). For a static surface
+//! ΔZ telescopes (the sum is the depth difference between the first and the last frame along
+//! the warp chain), so W stays within the sensor noise; a steady approach adds up to its
+//! speed / (1 − retention).
 //!
 //! What a leaky sum also adds up is any *systematic* error of ΔZ, and the camera motion's error
 //! is one: the closed loop's DVO was measured to be off by 2–4 mm per frame in the same

@@ -57,6 +57,7 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutp
     // Steps 3–9, pixel by pixel in the documented order.
     let mut counts = TransportCounts::default();
     let config = inputs.config;
+    let slow_events = config.slow_evidence.is_some_and(|c| c.occlusion_events);
     for (i, source) in warp.iter().enumerate() {
         let (x, y) = (i % width, i / width);
         let measured = inputs.depth_m.get(x, y);
@@ -86,12 +87,11 @@ pub fn transport_scalar(inputs: &TransportInputs<'_>, mut outputs: TransportOutp
                 _ => 0.0,
             };
             let tau_alpha = config.threshold(config.alpha, compensated);
-            let events = config.slow_evidence.is_some_and(|c| c.occlusion_events);
             let source = slow_source.map_or(NO_SOURCE, |n| n as u32);
             let value = if slow_source.is_some()
                 && delta_z > -config.threshold(config.beta, compensated)
                 && (delta_z <= tau_alpha
-                    || (events
+                    || (slow_events
                         && !source_at_depth_edge(
                             inputs.compensated_previous_m.as_slice(),
                             inputs.compensated_previous_m.width(),
