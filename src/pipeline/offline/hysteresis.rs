@@ -53,6 +53,10 @@ pub(super) struct Held {
     accumulation_m: DepthMeters,
     /// Pixels off the mask with W above the low threshold: (pixel index, depth in m).
     candidates: Vec<(u32, f32)>,
+    /// Where each candidate lands in the next held frame (filled when that frame is the newest).
+    landing: Vec<[i32; 2]>,
+    /// The pixels the running sweep added to this frame.
+    fresh: Vec<u32>,
 }
 
 /// The held frames and the sweep's parameters.
@@ -66,6 +70,8 @@ pub(super) struct Hysteresis {
     spare: Vec<Held>,
     /// Scratch of the candidates (one image row).
     row: Vec<u8>,
+    /// Scratch of the sweep: the seeds it added to the frame it tests against (else 0).
+    fresh_seeds: Mask,
 }
 
 impl Hysteresis {
@@ -80,6 +86,7 @@ impl Hysteresis {
             held: VecDeque::with_capacity(config.hysteresis_frames + 1),
             spare: Vec::new(),
             row: Vec::with_capacity(size.width),
+            fresh_seeds: Mask::filled(size, 0),
         })
     }
 
@@ -103,6 +110,8 @@ impl Hysteresis {
             seeds: Mask::filled(size, 0),
             accumulation_m: DepthMeters::filled(size, 0.0),
             candidates: Vec::new(),
+            landing: Vec::new(),
+            fresh: Vec::new(),
         });
         held.index = out.index;
         held.timestamp_ns = out.timestamp_ns;
@@ -126,6 +135,7 @@ impl Hysteresis {
             *s = r & !o;
         }
         held.candidates.clear();
+        held.landing.clear();
         self.held.push_back(held);
     }
 
@@ -139,12 +149,22 @@ impl Hysteresis {
         candidates: impl FnOnce(f32, &mut Vec<u8>, &mut Vec<(u32, f32)>),
         emit: &mut Emit<'_>,
     ) -> Result<()> {
+        self.settle_with(candidates, emit, Self::sweep)
+    }
+
+    /// [`Self::settle`] with the given sweep.
+    fn settle_with(
+        &mut self,
+        candidates: impl FnOnce(f32, &mut Vec<u8>, &mut Vec<(u32, f32)>),
+        emit: &mut Emit<'_>,
+        sweep: fn(&mut Self),
+    ) -> Result<()> {
         if let Some(held) = self.held.back_mut() {
             candidates(self.low_fraction, &mut self.row, &mut held.candidates);
             let mask = held.mask.as_slice();
             held.candidates.retain(|&(i, _)| mask[i as usize] == 0);
         }
-        self.sweep();
+        sweep(self);
         while self.held.len() > self.frames {
             self.emit_oldest(emit)?;
         }
@@ -182,17 +202,80 @@ impl Hysteresis {
     }
 
     /// From the newest frame back: marks the candidates of each held frame that land near a
-    /// marked pixel of the frame after it; stops at a frame that gains nothing, or across a
-    /// detector restart (a jump between the frames).
+    /// seed of the frame after it; stops at a frame that gains nothing, or across a detector
+    /// restart (a jump between the frames).
+    ///
+    /// Incremental: a frame's candidates are tested against all of the next frame's seeds once,
+    /// when that frame is the newest, and then only against the seeds a later sweep adds to it.
+    /// Seeds only grow, and a frame's successor never changes, so a candidate that missed the
+    /// seeds it was tested against can only hit the ones added since: the marks are those of
+    /// re-testing every candidate against every seed each sweep.
     fn sweep(&mut self) {
-        let (width, height) = (self.size.width, self.size.height);
-        let (fx, fy, cx, cy) = (
-            self.intrinsics.fx as f32,
-            self.intrinsics.fy as f32,
-            self.intrinsics.cx as f32,
-            self.intrinsics.cy as f32,
-        );
-        let r = self.radius_px as isize;
+        let size = self.size;
+        let r = self.radius_px as i64;
+        let held = self.held.make_contiguous();
+        for frame in held.iter_mut() {
+            frame.fresh.clear();
+        }
+        for later in (1..held.len()).rev() {
+            let (earlier, rest) = held.split_at_mut(later);
+            let (before, after) = (&mut earlier[later - 1], &mut rest[0]);
+            if after.stats.detector_reset {
+                return;
+            }
+            let first_test = before.landing.len() != before.candidates.len();
+            if first_test {
+                let motion = (after.world_from_camera.inverse() * before.world_from_camera).cast::<f32>();
+                let rigid = (
+                    motion.rotation.to_rotation_matrix().into_inner(),
+                    motion.translation.vector,
+                );
+                before.landing.clear();
+                before.landing.extend(
+                    before
+                        .candidates
+                        .iter()
+                        .map(|&(i, z)| landing(&self.intrinsics, size, &rigid, i, z)),
+                );
+            } else {
+                if after.fresh.is_empty() {
+                    return;
+                }
+                for &i in &after.fresh {
+                    self.fresh_seeds.as_mut_slice()[i as usize] = u8::MAX;
+                }
+            }
+            let target = if first_test {
+                after.seeds.as_slice()
+            } else {
+                self.fresh_seeds.as_slice()
+            };
+            let (mask, seeds) = (before.mask.as_mut_slice(), before.seeds.as_mut_slice());
+            for (&(i, _), &at) in before.candidates.iter().zip(&before.landing) {
+                let index = i as usize;
+                if mask[index] == 0 && window_hits(target, size, at, r) {
+                    mask[index] = u8::MAX;
+                    seeds[index] = u8::MAX;
+                    before.fresh.push(i);
+                }
+            }
+            if !first_test {
+                for &i in &after.fresh {
+                    self.fresh_seeds.as_mut_slice()[i as usize] = 0;
+                }
+            }
+            if before.fresh.is_empty() {
+                return;
+            }
+        }
+    }
+
+    /// The reference of [`Self::sweep`]: every sweep tests every unmarked candidate against all
+    /// of the next frame's seeds.
+    #[cfg(test)]
+    fn sweep_reference(&mut self) {
+        let size = self.size;
+        let r = self.radius_px as i64;
         let held = self.held.make_contiguous();
         for later in (1..held.len()).rev() {
             let (earlier, rest) = held.split_at_mut(later);
@@ -201,48 +284,24 @@ impl Hysteresis {
                 return;
             }
             let motion = (after.world_from_camera.inverse() * before.world_from_camera).cast::<f32>();
-            let rotation = motion.rotation.to_rotation_matrix().into_inner();
-            let translation = motion.translation.vector;
-            let target = after.seeds.as_slice();
-            let mut added = 0usize;
-            let (candidates, mask, seeds) = (
-                &before.candidates,
-                before.mask.as_mut_slice(),
-                before.seeds.as_mut_slice(),
+            let rigid = (
+                motion.rotation.to_rotation_matrix().into_inner(),
+                motion.translation.vector,
             );
-            for &(i, z) in candidates {
-                let i = i as usize;
-                if mask[i] != 0 {
-                    continue;
-                }
-                let (x, y) = ((i % width) as f32, (i / width) as f32);
-                let p = nalgebra::Vector3::new(z * (x - cx) / fx, z * (y - cy) / fy, z);
-                let q = rotation * p + translation;
-                if q.z <= 0.0 {
-                    continue;
-                }
-                let u = (fx * q.x / q.z + cx).round();
-                let v = (fy * q.y / q.z + cy).round();
-                if !(u.is_finite() && v.is_finite()) {
-                    continue;
-                }
-                let (u, v) = (u as isize, v as isize);
-                let x0 = (u - r).max(0);
-                let x1 = (u + r).min(width as isize - 1);
-                let y0 = (v - r).max(0);
-                let y1 = (v + r).min(height as isize - 1);
-                if x0 > x1 || y0 > y1 {
-                    continue;
-                }
-                let hit = (y0..=y1).any(|yy| {
-                    let row = yy as usize * width;
-                    target[row + x0 as usize..=row + x1 as usize]
-                        .iter()
-                        .any(|&m| m != 0)
-                });
-                if hit {
-                    mask[i] = u8::MAX;
-                    seeds[i] = u8::MAX;
+            let mut added = 0usize;
+            let (mask, seeds) = (before.mask.as_mut_slice(), before.seeds.as_mut_slice());
+            for &(i, z) in &before.candidates {
+                let index = i as usize;
+                if mask[index] == 0
+                    && window_hits(
+                        after.seeds.as_slice(),
+                        size,
+                        landing(&self.intrinsics, size, &rigid, i, z),
+                        r,
+                    )
+                {
+                    mask[index] = u8::MAX;
+                    seeds[index] = u8::MAX;
                     added += 1;
                 }
             }
@@ -251,6 +310,62 @@ impl Hysteresis {
             }
         }
     }
+}
+
+/// Where the point of pixel `i` at depth `z_m` lands in the next frame, moved by
+/// `next_from_this` (rotation, translation): the rounded pixel, or [`NOWHERE`] behind the
+/// camera or off any finite pixel.
+fn landing(
+    intrinsics: &PinholeIntrinsics,
+    size: ImageSize,
+    (rotation, translation): &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>),
+    i: u32,
+    z_m: f32,
+) -> [i32; 2] {
+    let (fx, fy, cx, cy) = (
+        intrinsics.fx as f32,
+        intrinsics.fy as f32,
+        intrinsics.cx as f32,
+        intrinsics.cy as f32,
+    );
+    let i = i as usize;
+    let (x, y) = ((i % size.width) as f32, (i / size.width) as f32);
+    let p = nalgebra::Vector3::new(z_m * (x - cx) / fx, z_m * (y - cy) / fy, z_m);
+    let q = rotation * p + translation;
+    if q.z <= 0.0 {
+        return NOWHERE;
+    }
+    let u = (fx * q.x / q.z + cx).round();
+    let v = (fy * q.y / q.z + cy).round();
+    if !(u.is_finite() && v.is_finite()) {
+        return NOWHERE;
+    }
+    // Saturating: a point far off the image stays far off it.
+    [u as i32, v as i32]
+}
+
+/// A candidate that lands nowhere.
+const NOWHERE: [i32; 2] = [i32::MIN, i32::MIN];
+
+/// Whether `target` has a marked pixel within `r` (Chebyshev) of `at`, inside the image.
+fn window_hits(target: &[u8], size: ImageSize, at: [i32; 2], r: i64) -> bool {
+    if at == NOWHERE {
+        return false;
+    }
+    let (u, v) = (i64::from(at[0]), i64::from(at[1]));
+    let x0 = (u - r).max(0);
+    let x1 = (u + r).min(size.width as i64 - 1);
+    let y0 = (v - r).max(0);
+    let y1 = (v + r).min(size.height as i64 - 1);
+    if x0 > x1 || y0 > y1 {
+        return false;
+    }
+    (y0..=y1).any(|y| {
+        let row = y as usize * size.width;
+        target[row + x0 as usize..=row + x1 as usize]
+            .iter()
+            .any(|&m| m != 0)
+    })
 }
 
 #[cfg(test)]
@@ -391,5 +506,86 @@ mod tests {
         let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
         h.flush(&mut keep).expect("emit");
         assert!(emitted[0].1.is_empty(), "marked across a restart");
+    }
+
+    /// The incremental sweep marks what re-testing every candidate against every seed at each
+    /// sweep marks: a moving camera, an object wandering over a textured wall, dense
+    /// candidates, a restart halfway.
+    #[test]
+    fn the_incremental_sweep_matches_the_reference() {
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = move |n: u64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state % n
+        };
+        let frames = 40;
+        let scenes: Vec<_> = (0..frames)
+            .map(|index| {
+                let world_from_camera =
+                    Isometry3::translation(0.01 * index as f64, 0.002 * index as f64, 0.0)
+                        * nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.003 * index as f64, 0.0);
+                let (ox, oy) = (4 + (index as usize % 20), 6 + (index as usize / 3) % 10);
+                let mask: Vec<usize> = (0..SIZE.area())
+                    .filter(|&i| (i % SIZE.width).abs_diff(ox) <= 2 && (i / SIZE.width).abs_diff(oy) <= 2)
+                    .filter(|_| next(4) != 0)
+                    .collect();
+                let mut candidates = Vec::new();
+                for i in 0..SIZE.area() as u32 {
+                    if next(5) < 2 {
+                        candidates.push((i, 1.5 + next(100) as f32 * 0.01));
+                    }
+                }
+                (index, world_from_camera, mask, candidates, index == 23)
+            })
+            .collect();
+        let run = |sweep: fn(&mut Hysteresis)| {
+            let mut h = hysteresis(6);
+            let mut emitted = Vec::new();
+            for (index, world_from_camera, marked, candidates, reset) in &scenes {
+                let mut mask = Mask::filled(SIZE, 0);
+                for &i in marked {
+                    mask.as_mut_slice()[i] = u8::MAX;
+                }
+                let zero = DepthMeters::filled(SIZE, 0.0);
+                let none = Mask::filled(SIZE, 0);
+                let stats = FrameStats {
+                    detector_reset: *reset,
+                    ..FrameStats::default()
+                };
+                h.hold(
+                    &FrameOutput {
+                        index: *index,
+                        timestamp_ns: *index,
+                        mask: &mask,
+                        odometry_mask: &none,
+                        current_from_previous: Isometry3::identity(),
+                        world_from_camera: *world_from_camera,
+                        accumulation_m: &zero,
+                        stats,
+                    },
+                    &mask,
+                );
+                let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
+                h.settle_with(|_, _, out| out.extend_from_slice(candidates), &mut keep, sweep)
+                    .expect("emit");
+            }
+            let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
+            h.flush(&mut keep).expect("emit");
+            emitted
+        };
+        let incremental = run(Hysteresis::sweep);
+        let reference = run(Hysteresis::sweep_reference);
+        let added: usize = incremental
+            .iter()
+            .zip(&scenes)
+            .map(|((_, marked), scene)| marked.len() - scene.2.len())
+            .sum();
+        assert!(
+            added > 200,
+            "the sweep marked only {added} pixels: the scene does not exercise it"
+        );
+        assert_eq!(incremental, reference);
     }
 }
