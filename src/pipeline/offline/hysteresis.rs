@@ -225,11 +225,7 @@ impl Hysteresis {
             }
             let first_test = before.landing.len() != before.candidates.len();
             if first_test {
-                let motion = (after.world_from_camera.inverse() * before.world_from_camera).cast::<f32>();
-                let rigid = (
-                    motion.rotation.to_rotation_matrix().into_inner(),
-                    motion.translation.vector,
-                );
+                let rigid = after_from_before(before, after);
                 before.landing.clear();
                 before.landing.extend(
                     before
@@ -283,11 +279,7 @@ impl Hysteresis {
             if after.stats.detector_reset {
                 return;
             }
-            let motion = (after.world_from_camera.inverse() * before.world_from_camera).cast::<f32>();
-            let rigid = (
-                motion.rotation.to_rotation_matrix().into_inner(),
-                motion.translation.vector,
-            );
+            let rigid = after_from_before(before, after);
             let mut added = 0usize;
             let (mask, seeds) = (before.mask.as_mut_slice(), before.seeds.as_mut_slice());
             for &(i, z) in &before.candidates {
@@ -310,6 +302,15 @@ impl Hysteresis {
             }
         }
     }
+}
+
+/// The camera motion from held frame `before` to `after` as (rotation, translation).
+fn after_from_before(before: &Held, after: &Held) -> (nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>) {
+    let motion = (after.world_from_camera.inverse() * before.world_from_camera).cast::<f32>();
+    (
+        motion.rotation.to_rotation_matrix().into_inner(),
+        motion.translation.vector,
+    )
 }
 
 /// Where the point of pixel `i` at depth `z_m` lands in the next frame, moved by
@@ -403,12 +404,35 @@ mod tests {
         reset: bool,
         emitted: &mut Vec<(u64, Vec<usize>)>,
     ) {
+        hold(hysteresis, index, Isometry3::identity(), mask_pixels, reset);
+        let mut keep = |out: FrameOutput<'_>| record(&out, emitted);
+        hysteresis
+            .settle(
+                |fraction, _, out| {
+                    if w_m > fraction * ALPHA * DEPTH_M {
+                        out.extend(evidence.iter().map(|&i| (i as u32, DEPTH_M)));
+                    }
+                },
+                &mut keep,
+            )
+            .expect("emit");
+    }
+
+    /// Holds frame `index` seen from `world_from_camera`, its published mask the pixels
+    /// `mask_pixels`, all of them confirmed by the slow-change evidence (none in the odometry
+    /// mask).
+    fn hold(
+        hysteresis: &mut Hysteresis,
+        index: u64,
+        world_from_camera: Isometry3<f64>,
+        mask_pixels: &[usize],
+        reset: bool,
+    ) {
         let mut mask = Mask::filled(SIZE, 0);
         for &i in mask_pixels {
             mask.as_mut_slice()[i] = u8::MAX;
         }
         let zero = DepthMeters::filled(SIZE, 0.0);
-        // Confirmed by the slow-change evidence: not in the odometry mask.
         let none = Mask::filled(SIZE, 0);
         let stats = FrameStats {
             detector_reset: reset,
@@ -421,23 +445,12 @@ mod tests {
                 mask: &mask,
                 odometry_mask: &none,
                 current_from_previous: Isometry3::identity(),
-                world_from_camera: Isometry3::identity(),
+                world_from_camera,
                 accumulation_m: &zero,
                 stats,
             },
             &mask,
         );
-        let mut keep = |out: FrameOutput<'_>| record(&out, emitted);
-        hysteresis
-            .settle(
-                |fraction, _, out| {
-                    if w_m > fraction * ALPHA * DEPTH_M {
-                        out.extend(evidence.iter().map(|&i| (i as u32, DEPTH_M)));
-                    }
-                },
-                &mut keep,
-            )
-            .expect("emit");
     }
 
     /// Keeps an emitted frame's index and marked pixels.
@@ -544,29 +557,7 @@ mod tests {
             let mut h = hysteresis(6);
             let mut emitted = Vec::new();
             for (index, world_from_camera, marked, candidates, reset) in &scenes {
-                let mut mask = Mask::filled(SIZE, 0);
-                for &i in marked {
-                    mask.as_mut_slice()[i] = u8::MAX;
-                }
-                let zero = DepthMeters::filled(SIZE, 0.0);
-                let none = Mask::filled(SIZE, 0);
-                let stats = FrameStats {
-                    detector_reset: *reset,
-                    ..FrameStats::default()
-                };
-                h.hold(
-                    &FrameOutput {
-                        index: *index,
-                        timestamp_ns: *index,
-                        mask: &mask,
-                        odometry_mask: &none,
-                        current_from_previous: Isometry3::identity(),
-                        world_from_camera: *world_from_camera,
-                        accumulation_m: &zero,
-                        stats,
-                    },
-                    &mask,
-                );
+                hold(&mut h, *index, *world_from_camera, marked, *reset);
                 let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
                 h.settle_with(|_, _, out| out.extend_from_slice(candidates), &mut keep, sweep)
                     .expect("emit");
