@@ -172,7 +172,8 @@ found = next(i for i, f in enumerate(frames) if f["truth_pixels"] and f["recall"
 print("sliding_on_desk enters at the image corner: its first pixel is in view at frame %d, five" % start)
 print("frames later it shows %d px, fewer than the %d-px minimum object size at %d×%d, and it lies" % (at_target, min_px, *size))
 print("close in front of the desk, so it occludes little. It reaches that size at frame %d and a" % big_enough)
-print("recall of 0.5 at frame %d (%d frames later)." % (found, found - big_enough))
+later = found - big_enough
+print("recall of 0.5 at frame %d (%d frame%s later)." % (found, later, "" if later == 1 else "s"))
 print()
 print("Held out: the same classes with other seeds, room textures, sizes, speeds, depths and camera")
 print("paths (`Scenario::HELD_OUT`). No default was tuned on these; they are reported apart, same")

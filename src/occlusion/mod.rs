@@ -130,6 +130,8 @@ pub struct OcclusionDetector {
     intrinsics: PinholeIntrinsics,
     size: ImageSize,
     min_object_pixels: usize,
+    /// [`OcclusionConfig::exit_min_object_fraction`] of `min_object_pixels`.
+    exit_min_object_pixels: usize,
     /// [`OcclusionConfig::invalid_depth_gap_px_vga`] at this size, and its scratch.
     invalid_depth_gaps: gaps::InvalidDepthGaps,
     frames: u64,
@@ -204,6 +206,8 @@ impl OcclusionDetector {
             intrinsics,
             size,
             min_object_pixels: config.min_object_pixels(size),
+            exit_min_object_pixels: (config.min_object_pixels(size) as f32 * config.exit_min_object_fraction)
+                .ceil() as usize,
             invalid_depth_gaps: gaps::InvalidDepthGaps::new(size, config.invalid_depth_gap_px(size)),
             frames: 0,
             rays: PixelRays::new(&intrinsics, size.width, size.height),
@@ -497,7 +501,16 @@ impl OcclusionDetector {
             || {
                 self.components.suppress_and_predict(
                     &self.config,
-                    self.min_object_pixels,
+                    components::MinObjectSize {
+                        pixels: self.min_object_pixels,
+                        leaving: (self.config.prune_exit_margin_px > 0
+                            && self.exit_min_object_pixels < self.min_object_pixels)
+                            .then_some(components::LeavingObject {
+                                previous_mask: self.mask.as_slice(),
+                                min_pixels: self.exit_min_object_pixels,
+                                border_margin_px: self.config.prune_exit_margin_px,
+                            }),
+                    },
                     counts.object_bounds,
                     &self.compensated_m,
                     &self.newly_discovered,

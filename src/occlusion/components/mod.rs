@@ -240,6 +240,53 @@ impl PredictionTargets<'_> {
     }
 }
 
+/// The size a component of A must have to stay (step 10).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct MinObjectSize<'a> {
+    /// Pixels of a component at least.
+    pub pixels: usize,
+    /// Smaller components that are a leaving object's remainder stay too
+    /// ([`crate::occlusion::OcclusionConfig::exit_min_object_fraction`]).
+    pub leaving: Option<LeavingObject<'a>>,
+}
+
+/// What a leaving object's remainder is ([`MinObjectSize::leaving`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct LeavingObject<'a> {
+    /// The previous frame's final mask (nonzero = object).
+    pub previous_mask: &'a [u8],
+    /// Pixels of such a component at least.
+    pub min_pixels: usize,
+    /// How near the image border it must reach (px).
+    pub border_margin_px: usize,
+}
+
+impl MinObjectSize<'_> {
+    /// Whether the component of `pixels` pixels in `runs` of a `width` × `height` image stays:
+    /// it has [`Self::pixels`], or it is a leaving object's remainder (at least
+    /// [`LeavingObject::min_pixels`], within [`LeavingObject::border_margin_px`] of the border,
+    /// and on the previous frame's mask at one pixel or more).
+    fn keeps(&self, runs: &[Run], pixels: usize, width: usize, height: usize) -> bool {
+        pixels >= self.pixels
+            || self.leaving.is_some_and(|leaving| {
+                pixels >= leaving.min_pixels
+                    && runs
+                        .iter()
+                        .any(|run| run_near_border(run, width, height, leaving.border_margin_px))
+                    && runs
+                        .iter()
+                        .any(|run| leaving.previous_mask[run.pixels(width)].iter().any(|&m| m != 0))
+            })
+    }
+}
+
+/// Whether `run` reaches within `margin_px` of the border of a `width` × `height` image (a run
+/// does when its first or last pixel does).
+fn run_near_border(run: &Run, width: usize, height: usize, margin_px: usize) -> bool {
+    let (x_first, x_last, y) = (run.x0 as usize, run.x1 as usize - 1, run.y as usize);
+    x_first < margin_px || y < margin_px || x_last + margin_px >= width || y + margin_px >= height
+}
+
 impl Components {
     pub(super) fn new(size: ImageSize) -> Self {
         let n = size.area();
@@ -290,13 +337,13 @@ impl Components {
     }
 
     /// Step 10: labels the object set already in the object-set buffer (bounding box `bounds`),
-    /// erases components below `min_object_pixels` from A and, when enabled, grows the others
+    /// erases components below `min_size` from A and, when enabled, grows the others
     /// into Ñ. Components are handled in the row-major order of their first pixel (they share
     /// the prediction target, so the order matters).
     pub(super) fn suppress_and_predict(
         &mut self,
         config: &OcclusionConfig,
-        min_object_pixels: usize,
+        min_size: MinObjectSize<'_>,
         bounds: Option<PixelBounds>,
         compensated_m: &DepthMeters,
         newly_discovered: &Image<u8>,
@@ -334,7 +381,7 @@ impl Components {
             (bounds.x0, bounds.y0),
         );
         for k in 0..stats.components {
-            if self.runs.pixels(k) < min_object_pixels {
+            if !min_size.keeps(self.runs.runs(k), self.runs.pixels(k), self.width, self.height) {
                 let a = accumulation_m.as_mut_slice();
                 for run in self.runs.runs(k) {
                     a[run.pixels(self.width)].fill(0.0);
@@ -556,14 +603,7 @@ impl Components {
         let (width, height) = (self.width, self.height);
         let exit_margin_px = config.prune_exit_margin_px;
         let carried = predicted_carried.as_slice();
-        // A run reaches near the border when its first or last pixel does.
-        let near_border = |run: &Run| {
-            let (x_first, x_last, y) = (run.x0 as usize, run.x1 as usize - 1, run.y as usize);
-            x_first < exit_margin_px
-                || y < exit_margin_px
-                || x_last + exit_margin_px >= width
-                || y + exit_margin_px >= height
-        };
+        let near_border = |run: &Run| run_near_border(run, width, height, exit_margin_px);
         let diagonal = config.prune_adjacency == Adjacency::Eight;
         let count = self.runs.label(
             &predicted.as_slice()[bounds.y0 * width..],

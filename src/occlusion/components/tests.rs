@@ -313,7 +313,17 @@ fn prediction_with_stamps_near_the_target_matches_stamping_every_source() {
             components.stamp_all_sources = stamp_all_sources;
             components.object_set.copy_from_slice(&object);
             let mut a = a.clone();
-            let stats = components.suppress_and_predict(&config, 20, Some(bounds), &depth, &newly, &mut a);
+            let stats = components.suppress_and_predict(
+                &config,
+                MinObjectSize {
+                    pixels: 20,
+                    leaving: None,
+                },
+                Some(bounds),
+                &depth,
+                &newly,
+                &mut a,
+            );
             // The target is left all 0 for the next frame.
             assert!(components.target.iter().all(|&t| t == 0));
             let bits: Vec<u32> = a.as_slice().iter().map(|v| v.to_bits()).collect();
@@ -401,5 +411,99 @@ fn sliding_square_filter_matches_the_definition() {
                 "r {r} erode {erode}"
             );
         }
+    }
+}
+
+/// Step 10's size test: a component below the minimum object size stays only as a leaving
+/// object's remainder (big enough for the exit size, near the border, on the previous mask).
+#[test]
+fn a_leaving_objects_remainder_stays_down_to_the_exit_size() {
+    let size = ImageSize::new(40, 30);
+    let rect = |x0: usize, y0: usize, w: usize, h: usize| -> Vec<usize> {
+        (y0..y0 + h)
+            .flat_map(|y| (x0..x0 + w).map(move |x| y * size.width + x))
+            .collect()
+    };
+    // 12-px components (the minimum object size is 20, the exit size 5), one 4-px component.
+    let at_border_on_previous = rect(0, 2, 3, 4);
+    let at_border_elsewhere = rect(0, 20, 3, 4);
+    let inside_on_previous = rect(18, 12, 3, 4);
+    let tiny_at_border_on_previous = rect(37, 2, 2, 2);
+    let big_inside_elsewhere = rect(10, 24, 7, 3);
+    let mut previous_mask = vec![0u8; size.area()];
+    for &i in [
+        &at_border_on_previous,
+        &inside_on_previous,
+        &tiny_at_border_on_previous,
+    ]
+    .into_iter()
+    .flatten()
+    {
+        previous_mask[i] = MASK_SET;
+    }
+    // The previous mask touches each of those components at one pixel only.
+    for component in [
+        &at_border_on_previous,
+        &inside_on_previous,
+        &tiny_at_border_on_previous,
+    ] {
+        for &i in &component[1..] {
+            previous_mask[i] = 0;
+        }
+    }
+    let components = [
+        (&at_border_on_previous, true),
+        (&at_border_elsewhere, false),
+        (&inside_on_previous, false),
+        (&tiny_at_border_on_previous, false),
+        (&big_inside_elsewhere, true),
+    ];
+    let config = OcclusionConfig {
+        thin_structure_radius_px: 0,
+        predict_newly_discovered: false,
+        ..OcclusionConfig::default()
+    };
+    let depth = DepthMeters::filled(size, 1.0);
+    let newly = Image::filled(size, 0u8);
+    let bounds = PixelBounds {
+        x0: 0,
+        x1: size.width - 1,
+        y0: 0,
+        y1: size.height - 1,
+    };
+    for leaving in [true, false] {
+        let mut labelling = Components::new(size);
+        let mut a = DepthMeters::filled(size, 0.0);
+        for (component, _) in components {
+            for &i in component {
+                labelling.object_set[i] = 1;
+                a.as_mut_slice()[i] = 0.5;
+            }
+        }
+        let min_size = MinObjectSize {
+            pixels: 20,
+            leaving: leaving.then_some(LeavingObject {
+                previous_mask: &previous_mask,
+                min_pixels: 5,
+                border_margin_px: 2,
+            }),
+        };
+        let stats = labelling.suppress_and_predict(&config, min_size, Some(bounds), &depth, &newly, &mut a);
+        assert_eq!(stats.components, components.len());
+        for (k, (component, stays_when_leaving)) in components.iter().enumerate() {
+            let stays = if leaving {
+                *stays_when_leaving
+            } else {
+                component.len() >= 20
+            };
+            for &i in component.iter() {
+                assert_eq!(
+                    a.as_slice()[i],
+                    if stays { 0.5 } else { 0.0 },
+                    "component {k}, leaving {leaving}"
+                );
+            }
+        }
+        assert_eq!(stats.small_components_erased, if leaving { 3 } else { 4 });
     }
 }
