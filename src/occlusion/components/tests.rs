@@ -430,26 +430,14 @@ fn a_leaving_objects_remainder_stays_down_to_the_exit_size() {
     let inside_on_previous = rect(18, 12, 3, 4);
     let tiny_at_border_on_previous = rect(37, 2, 2, 2);
     let big_inside_elsewhere = rect(10, 24, 7, 3);
+    // The previous mask touches each of these components at its first pixel only.
     let mut previous_mask = vec![0u8; size.area()];
-    for &i in [
-        &at_border_on_previous,
-        &inside_on_previous,
-        &tiny_at_border_on_previous,
-    ]
-    .into_iter()
-    .flatten()
-    {
-        previous_mask[i] = MASK_SET;
-    }
-    // The previous mask touches each of those components at one pixel only.
     for component in [
         &at_border_on_previous,
         &inside_on_previous,
         &tiny_at_border_on_previous,
     ] {
-        for &i in &component[1..] {
-            previous_mask[i] = 0;
-        }
+        previous_mask[component[0]] = MASK_SET;
     }
     let components = [
         (&at_border_on_previous, true),
