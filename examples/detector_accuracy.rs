@@ -41,8 +41,9 @@ use occmask::metrics::{ate, rpe, FrameCounts, SegmentationTally};
 use occmask::occlusion::consistency::depth_consistency;
 use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector, OcclusionStats};
 use occmask::pipeline::offline::registration::RegistrationProfile;
-use occmask::pipeline::offline::OfflineProcessor;
-use occmask::pipeline::{FrameInput, FrameOutput, PoseSource, ProcessingMode, Processor, ProcessorConfig};
+use occmask::pipeline::{
+    FrameInput, FrameOutput, PoseSource, ProcessingMode, Processor, ProcessorConfig, SequenceProcessor,
+};
 use occmask::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 use occmask::trajectory::interpolate;
 use tum::TumSequence;
@@ -428,25 +429,16 @@ fn real_dvo(
             .depth_with_nearest_color()
             .into_iter()
             .map(|pair| sequence.decode(&pair).unwrap());
-        match mode {
-            ProcessingMode::Offline => {
-                let mut processor = OfflineProcessor::new(SIZE, intrinsics, config).unwrap();
-                for frame in frames {
-                    processor.push(&input(&frame), &mut keep).unwrap();
-                }
-                processor.finish(&mut keep).unwrap();
-                println!(
-                    "colour registered: {:?} (score {:?})",
-                    processor.colour_registered(),
-                    processor.registration_score()
-                );
-            }
-            ProcessingMode::Causal => {
-                let mut processor = Processor::new(SIZE, intrinsics, config).unwrap();
-                for frame in frames {
-                    keep(processor.process(&input(&frame)).unwrap()).unwrap();
-                }
-            }
+        let mut processor = SequenceProcessor::new(SIZE, intrinsics, config).unwrap();
+        for frame in frames {
+            processor.push(&input(&frame), &mut keep).unwrap();
+        }
+        processor.finish(&mut keep).unwrap();
+        if let Some(registration) = processor.colour_registration() {
+            println!(
+                "colour registered: {} (score {:?})",
+                registration.registered, registration.score
+            );
         }
         if let Some(d) = dump_dir {
             for (i, (pair, mask)) in sequence.depth_with_nearest_color().iter().zip(&masks).enumerate() {

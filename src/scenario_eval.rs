@@ -27,8 +27,11 @@ use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
 use crate::metrics::onset::{worst_onset, OnsetRun, OnsetTracker};
 use crate::metrics::{ate, rpe, FrameCounts, SegmentationSummary, SegmentationTally};
-use crate::pipeline::offline::OfflineProcessor;
-use crate::pipeline::{FrameInput, FrameOutput, PoseSource, Processor, ProcessorConfig};
+#[cfg(doc)]
+use crate::pipeline::{offline::OfflineProcessor, Processor};
+use crate::pipeline::{
+    FrameInput, FrameOutput, PoseSource, ProcessingMode, ProcessorConfig, SequenceProcessor,
+};
 use crate::synthetic::{Scenario, SyntheticFrame, SyntheticSequence};
 
 /// Frames excluded from the false-positive figure: the static control's warm-up.
@@ -304,6 +307,11 @@ pub fn evaluate_observed(
 ) -> Result<ScenarioScore> {
     let config = ProcessorConfig {
         pose_source: mode.pose_source(),
+        mode: if mode.offline() {
+            ProcessingMode::Offline
+        } else {
+            ProcessingMode::Causal
+        },
         ..*config
     };
     let mut scorer = Scorer {
@@ -320,26 +328,15 @@ pub fn evaluate_observed(
     };
     let external = matches!(config.pose_source, PoseSource::External { .. });
     let started = Instant::now();
-    if mode.offline() {
-        let mut processor = OfflineProcessor::new(sequence.size, sequence.intrinsics, config)?;
-        let mut emit = |out: FrameOutput<'_>| {
-            observe(scorer.per_frame.len(), out.mask);
-            scorer.add(&out)
-        };
-        for f in &sequence.frames {
-            let frame = input(f, external);
-            processor.push(&frame, &mut emit)?;
-        }
-        processor.finish(&mut emit)?;
-    } else {
-        let mut processor = Processor::new(sequence.size, sequence.intrinsics, config)?;
-        for f in &sequence.frames {
-            let frame = input(f, external);
-            let out = processor.process(&frame)?;
-            observe(scorer.per_frame.len(), out.mask);
-            scorer.add(&out)?;
-        }
+    let mut processor = SequenceProcessor::new(sequence.size, sequence.intrinsics, config)?;
+    let mut emit = |out: FrameOutput<'_>| {
+        observe(scorer.per_frame.len(), out.mask);
+        scorer.add(&out)
+    };
+    for f in &sequence.frames {
+        processor.push(&input(f, external), &mut emit)?;
     }
+    processor.finish(&mut emit)?;
     let elapsed_s = started.elapsed().as_secs_f64();
     let truth: Vec<Isometry3<f64>> = sequence.frames.iter().map(|f| f.world_from_camera).collect();
     let n = scorer.estimated.len();

@@ -152,6 +152,9 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
     if args.causal {
         processor.mode = ProcessingMode::Causal;
     }
+    if args.full_resolution {
+        processor.offline.min_working_side_px = 0;
+    }
     processor.validate().with_context(|| match &args.config {
         Some(path) => format!("--config {}", path.display()),
         None => "the detector and DVO parameters".to_owned(),

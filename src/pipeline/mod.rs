@@ -82,6 +82,8 @@
 mod config;
 mod frame;
 pub mod offline;
+mod reduce;
+mod sequence;
 
 use std::time::Instant;
 
@@ -102,6 +104,7 @@ pub use config::{
 pub use frame::{
     DvoSummary, FrameInput, FrameOutput, FrameResult, FrameStats, Implausible, PoseFallback, PoseOutcome,
 };
+pub use sequence::SequenceProcessor;
 
 /// The frame interval assumed when stamps repeat or go backwards (for the plausibility
 /// bounds): 1/30 s.

@@ -41,6 +41,7 @@ use std::collections::VecDeque;
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
+use super::reduce::{copy_or_enlarge, halvings_keeping_side, Reduced};
 use super::{
     check_size, valid_depth_fraction, FrameInput, FrameOutput, PoseSource, Processor, ProcessorConfig,
 };
@@ -50,7 +51,7 @@ use crate::geometry::se3::is_finite_pose;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
 use crate::occlusion::{OcclusionConfig, OcclusionDetector};
-use crate::pyramid::{downsample_depth_into, downsample_gray_into, level_size};
+use crate::pyramid::level_size;
 
 mod hysteresis;
 pub mod registration;
@@ -86,6 +87,12 @@ pub struct OfflineConfig {
     /// frame cannot carry the camera with it. In (0, 1]; `None`: off (the default: on the real
     /// recordings it costs accuracy, docs/method.md D21). The refinement pass is unchanged.
     pub first_pass_ignore_nearer_than: Option<f32>,
+    /// Working resolution of the offline mode (applied by [`super::SequenceProcessor`]; an
+    /// [`OfflineProcessor`] processes frames at the size it is given): frames are halved as
+    /// many times as their short side keeps at least this many pixels, processed at that size,
+    /// and their masks enlarged back. 0 = full resolution; otherwise at least
+    /// [`MIN_WORKING_SIDE_PX`]. The causal mode always runs at full resolution.
+    pub min_working_side_px: usize,
     /// DVO of the closed loop's refinement pass.
     pub refinement_dvo: DvoConfig,
     /// The refinement pass's DVO runs on a pyramid level whose short side has at least this
@@ -188,6 +195,17 @@ pub const DEFAULT_REFINEMENT_MIN_SIDE_PX: usize = 240;
 /// noisy rim of the depth image).
 pub const FAR_LAYER_QUANTILE: f64 = 0.9;
 
+/// Default [`OfflineConfig::min_working_side_px`]: VGA (and 1280×720) is processed at half
+/// size, 320×240 as it is. On people walking past a hand-held VGA camera (Bonn "crowd") the
+/// offline mode ran 2.6× faster than at full resolution, with the masks and the closed loop as
+/// accurate (docs/method.md, D24); 240 px is also the smallest short side at which the
+/// slow-change evidence runs.
+pub const DEFAULT_MIN_WORKING_SIDE_PX: usize = 240;
+
+/// The smallest [`OfflineConfig::min_working_side_px`] other than 0: below it an object of the
+/// minimum size is a few pixels across.
+pub const MIN_WORKING_SIDE_PX: usize = 60;
+
 /// The first pass is never reduced below this many pixels on its short side: VGA runs at
 /// 320×240, smaller images at full resolution. At 160×120 the detector lost an object resting
 /// and then moving slowly (the synthetic late-onset class at 320×240: F1 0.728 and onset 31
@@ -205,6 +223,7 @@ impl Default for OfflineConfig {
             first_pass_min_side_px: DEFAULT_FIRST_PASS_MIN_SIDE_PX,
             first_pass_halvings: DEFAULT_FIRST_PASS_HALVINGS,
             first_pass_ignore_nearer_than: None,
+            min_working_side_px: DEFAULT_MIN_WORKING_SIDE_PX,
             hysteresis_frames: DEFAULT_HYSTERESIS_FRAMES,
             hysteresis_low_fraction: DEFAULT_HYSTERESIS_LOW_FRACTION,
             refinement_min_side_px: DEFAULT_REFINEMENT_MIN_SIDE_PX,
@@ -240,6 +259,13 @@ impl OfflineConfig {
                 name: "offline.hysteresis_low_fraction",
                 value: self.hysteresis_low_fraction.to_string(),
                 expected: "a fraction in (0, 1]".into(),
+            });
+        }
+        if self.min_working_side_px != 0 && self.min_working_side_px < MIN_WORKING_SIDE_PX {
+            return Err(Error::InvalidParameter {
+                name: "offline.min_working_side_px",
+                value: self.min_working_side_px.to_string(),
+                expected: format!("0 (full resolution) or at least {MIN_WORKING_SIDE_PX} pixels"),
             });
         }
         if let Some(fraction) = self.first_pass_ignore_nearer_than {
@@ -673,7 +699,7 @@ impl FirstPass {
                 buffered.world_from_camera = out.world_from_camera;
                 buffered.first_reset = out.stats.detector_reset;
                 if self.source == PoseSource::DvoClosedLoop {
-                    copy_or_enlarge_mask(out.odometry_mask, &mut buffered.first_mask);
+                    copy_or_enlarge(out.odometry_mask, &mut buffered.first_mask);
                 }
             }
             None => {
@@ -901,12 +927,7 @@ fn quantile(values: &mut [f32], q: f64) -> Option<f32> {
 /// `requested` halvings of `size`, fewer where the image would get smaller than
 /// [`MIN_REDUCED_SIDE_PX`] on its short side.
 fn usable_halvings(size: ImageSize, requested: usize) -> usize {
-    (0..requested)
-        .take_while(|&k| {
-            let next = level_size(size, k + 1);
-            next.width.min(next.height) >= MIN_REDUCED_SIDE_PX
-        })
-        .count()
+    halvings_keeping_side(size, MIN_REDUCED_SIDE_PX, requested)
 }
 
 /// The first pass's detector parameters, for the image halved `halvings` times: the border
@@ -920,66 +941,6 @@ fn first_pass_occlusion_config(config: &OcclusionConfig, halvings: usize) -> Occ
         prune_exit_margin_px: config.prune_exit_margin_px >> halvings,
         slow_evidence: None,
         ..*config
-    }
-}
-
-/// Scratch of the first pass at reduced resolution: each halving's gray and depth.
-struct Reduced {
-    gray: Vec<GrayF32>,
-    depth_m: Vec<DepthMeters>,
-}
-
-impl Reduced {
-    /// `None` for 0 halvings.
-    fn new(size: ImageSize, halvings: usize) -> Option<Self> {
-        let sizes = || (1..=halvings).map(|k| level_size(size, k));
-        (halvings > 0).then(|| Self {
-            gray: sizes().map(|s| GrayF32::filled(s, 0.0)).collect(),
-            depth_m: sizes().map(|s| DepthMeters::filled(s, 0.0)).collect(),
-        })
-    }
-
-    /// `gray` halved by 2×2 box means and `depth_m` by edge-aware 2×2 reductions.
-    fn reduce<'a>(
-        &'a mut self,
-        gray: &'a GrayF32,
-        depth_m: &'a DepthMeters,
-    ) -> Result<(&'a GrayF32, &'a DepthMeters)> {
-        for k in 0..self.depth_m.len() {
-            let (done, rest) = self.gray.split_at_mut(k);
-            downsample_gray_into(done.last().unwrap_or(gray), &mut rest[0])?;
-            let (done, rest) = self.depth_m.split_at_mut(k);
-            downsample_depth_into(done.last().unwrap_or(depth_m), &mut rest[0])?;
-        }
-        Ok((
-            self.gray.last().unwrap_or(gray),
-            self.depth_m.last().unwrap_or(depth_m),
-        ))
-    }
-}
-
-/// `mask` into `full`: copied at the same size, else enlarged by the nearest pixel from the
-/// image halved some number of times; rows and columns beyond the reduced image's cover (odd
-/// sides) take its last ones.
-fn copy_or_enlarge_mask(mask: &Mask, full: &mut Mask) {
-    if mask.size() == full.size() {
-        full.as_mut_slice().copy_from_slice(mask.as_slice());
-        return;
-    }
-    let (rw, rh) = (mask.width(), mask.height());
-    let fw = full.width();
-    if rw == 0 || rh == 0 {
-        full.fill(0);
-        return;
-    }
-    let halvings = (full.width() / rw).max(1).ilog2();
-    let src = mask.as_slice();
-    for (y, row) in full.as_mut_slice().chunks_exact_mut(fw).enumerate() {
-        let ry = (y >> halvings).min(rh - 1);
-        let src_row = &src[ry * rw..(ry + 1) * rw];
-        for (x, m) in row.iter_mut().enumerate() {
-            *m = src_row[(x >> halvings).min(rw - 1)];
-        }
     }
 }
 

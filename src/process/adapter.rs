@@ -5,8 +5,8 @@
 use crate::error::Result;
 use crate::geometry::camera::PinholeIntrinsics;
 use crate::image_buf::ImageSize;
-use crate::pipeline::offline::{ColourRegistration, OfflineProcessor};
-use crate::pipeline::{FrameInput, FrameResult, ProcessingMode, Processor, ProcessorConfig};
+use crate::pipeline::offline::ColourRegistration;
+use crate::pipeline::{FrameInput, FrameResult, ProcessorConfig, SequenceProcessor};
 
 #[cfg(doc)]
 use super::ProcessConfig;
@@ -41,16 +41,11 @@ pub trait FrameProcessor {
 pub type ProcessorFactory<'a> =
     dyn FnMut(PinholeIntrinsics, ImageSize, &ProcessorConfig) -> Result<Box<dyn FrameProcessor>> + 'a;
 
-/// The per-sequence pipeline (DVO + detector: [`Processor`] in the causal mode,
-/// [`OfflineProcessor`] in the offline one) behind [`FrameProcessor`].
+/// The per-sequence pipeline (DVO + detector, causal or offline, at the working resolution:
+/// [`SequenceProcessor`]) behind [`FrameProcessor`].
 pub struct PipelineProcessor {
-    pipeline: Pipeline,
+    pipeline: SequenceProcessor,
     keep_accumulation: bool,
-}
-
-enum Pipeline {
-    Causal(Box<Processor>),
-    Offline(Box<OfflineProcessor>),
 }
 
 /// Choices of [`PipelineProcessor`] beyond the processor configuration.
@@ -65,21 +60,15 @@ impl PipelineProcessor {
     /// ([`ProcessorConfig::mode`] picks causal or offline).
     ///
     /// # Errors
-    /// Invalid intrinsics, image size or parameters, as [`Processor::new`].
+    /// Invalid intrinsics, image size or parameters, as [`SequenceProcessor::new`].
     pub fn new(
         intrinsics: PinholeIntrinsics,
         size: ImageSize,
         config: &ProcessorConfig,
         options: PipelineOptions,
     ) -> Result<Self> {
-        let pipeline = match config.mode {
-            ProcessingMode::Causal => Pipeline::Causal(Box::new(Processor::new(size, intrinsics, *config)?)),
-            ProcessingMode::Offline => {
-                Pipeline::Offline(Box::new(OfflineProcessor::new(size, intrinsics, *config)?))
-            }
-        };
         Ok(Self {
-            pipeline,
+            pipeline: SequenceProcessor::new(size, intrinsics, *config)?,
             keep_accumulation: options.keep_accumulation,
         })
     }
@@ -89,33 +78,25 @@ impl FrameProcessor for PipelineProcessor {
     fn push(&mut self, frame: &FrameInput<'_>) -> Result<Vec<FrameResult>> {
         let keep_accumulation = self.keep_accumulation;
         let mut done = Vec::new();
-        match &mut self.pipeline {
-            Pipeline::Causal(processor) => done.push(processor.process(frame)?.to_result(keep_accumulation)),
-            Pipeline::Offline(processor) => processor.push(frame, &mut |out| {
-                done.push(out.to_result(keep_accumulation));
-                Ok(())
-            })?,
-        }
+        self.pipeline.push(frame, &mut |out| {
+            done.push(out.to_result(keep_accumulation));
+            Ok(())
+        })?;
         Ok(done)
     }
 
     fn finish(&mut self) -> Result<Vec<FrameResult>> {
         let keep_accumulation = self.keep_accumulation;
         let mut done = Vec::new();
-        if let Pipeline::Offline(processor) = &mut self.pipeline {
-            processor.finish(&mut |out| {
-                done.push(out.to_result(keep_accumulation));
-                Ok(())
-            })?;
-        }
+        self.pipeline.finish(&mut |out| {
+            done.push(out.to_result(keep_accumulation));
+            Ok(())
+        })?;
         Ok(done)
     }
 
     fn colour_registration(&self) -> Option<ColourRegistration> {
-        match &self.pipeline {
-            Pipeline::Causal(_) => None,
-            Pipeline::Offline(processor) => processor.colour_registration(),
-        }
+        self.pipeline.colour_registration()
     }
 }
 
@@ -133,7 +114,7 @@ mod tests {
     use super::*;
     use crate::image_buf::Mask;
     use crate::mcap_io::annotate::moving_pixels;
-    use crate::pipeline::PoseSource;
+    use crate::pipeline::{PoseSource, ProcessingMode};
     use crate::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
     /// `--appearance-growth` reaches the detector: on a box that starts moving, the pipeline

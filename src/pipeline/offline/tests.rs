@@ -170,22 +170,6 @@ fn near_layer_fraction_outside_zero_to_one_is_rejected() {
     config.validate().unwrap();
 }
 
-#[test]
-fn enlarged_masks_repeat_each_reduced_pixel_and_cover_odd_sides() {
-    let mut reduced = Mask::filled(ImageSize::new(3, 2), 0);
-    reduced.as_mut_slice().copy_from_slice(&[1, 0, 2, 0, 3, 0]);
-    let mut full = Mask::filled(ImageSize::new(7, 5), 9);
-    copy_or_enlarge_mask(&reduced, &mut full);
-    let expected: [[u8; 7]; 5] = [
-        [1, 1, 0, 0, 2, 2, 2],
-        [1, 1, 0, 0, 2, 2, 2],
-        [0, 0, 3, 3, 0, 0, 0],
-        [0, 0, 3, 3, 0, 0, 0],
-        [0, 0, 3, 3, 0, 0, 0],
-    ];
-    assert_eq!(full.as_slice(), expected.concat().as_slice());
-}
-
 /// Mean F1 of the emitted masks against the ground truth, closed loop, offline, over the
 /// frames with a moving object.
 fn offline_f1(scenario: Scenario, size: ImageSize, frames: usize, offline: OfflineConfig) -> f64 {

@@ -1,0 +1,158 @@
+//! Frames halved for processing at a lower resolution and results enlarged back: the offline
+//! first pass's reduced frames ([`super::offline`]) and the working resolution of a whole
+//! sequence ([`super::sequence`]).
+
+use crate::error::Result;
+use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
+use crate::pyramid::{downsample_depth_into, downsample_gray_into, level_size};
+
+/// How many times `size` can be halved (at most `at_most`) while its short side keeps at least
+/// `min_side_px` pixels.
+pub(crate) fn halvings_keeping_side(size: ImageSize, min_side_px: usize, at_most: usize) -> usize {
+    (0..at_most)
+        .take_while(|&k| {
+            let next = level_size(size, k + 1);
+            next.width.min(next.height) >= min_side_px
+        })
+        .count()
+}
+
+/// Scratch of a reduced frame: each halving's gray and depth.
+pub(crate) struct Reduced {
+    gray: Vec<GrayF32>,
+    depth_m: Vec<DepthMeters>,
+}
+
+impl Reduced {
+    /// `None` for 0 halvings.
+    pub(crate) fn new(size: ImageSize, halvings: usize) -> Option<Self> {
+        let sizes = || (1..=halvings).map(|k| level_size(size, k));
+        (halvings > 0).then(|| Self {
+            gray: sizes().map(|s| GrayF32::filled(s, 0.0)).collect(),
+            depth_m: sizes().map(|s| DepthMeters::filled(s, 0.0)).collect(),
+        })
+    }
+
+    /// `gray` halved by 2×2 box means and `depth_m` by edge-aware 2×2 reductions.
+    ///
+    /// # Errors
+    /// [`crate::Error::SizeMismatch`] when the images are not of the size given to [`Self::new`].
+    pub(crate) fn reduce<'a>(
+        &'a mut self,
+        gray: &'a GrayF32,
+        depth_m: &'a DepthMeters,
+    ) -> Result<(&'a GrayF32, &'a DepthMeters)> {
+        for k in 0..self.depth_m.len() {
+            let (done, rest) = self.gray.split_at_mut(k);
+            downsample_gray_into(done.last().unwrap_or(gray), &mut rest[0])?;
+            let (done, rest) = self.depth_m.split_at_mut(k);
+            downsample_depth_into(done.last().unwrap_or(depth_m), &mut rest[0])?;
+        }
+        Ok((
+            self.gray.last().unwrap_or(gray),
+            self.depth_m.last().unwrap_or(depth_m),
+        ))
+    }
+}
+
+/// `image` into `full`: copied at the same size, else enlarged by the nearest pixel from the
+/// image halved some number of times; rows and columns beyond the reduced image's cover (odd
+/// sides) take its last ones.
+pub(crate) fn copy_or_enlarge<T: Copy + Default>(image: &Image<T>, full: &mut Image<T>) {
+    if image.size() == full.size() {
+        full.as_mut_slice().copy_from_slice(image.as_slice());
+        return;
+    }
+    let (rw, rh) = (image.width(), image.height());
+    let fw = full.width();
+    if rw == 0 || rh == 0 {
+        full.fill(T::default());
+        return;
+    }
+    let halvings = (full.width() / rw).max(1).ilog2();
+    let src = image.as_slice();
+    for (y, row) in full.as_mut_slice().chunks_exact_mut(fw).enumerate() {
+        let ry = (y >> halvings).min(rh - 1);
+        let src_row = &src[ry * rw..(ry + 1) * rw];
+        for (x, m) in row.iter_mut().enumerate() {
+            *m = src_row[(x >> halvings).min(rw - 1)];
+        }
+    }
+}
+
+/// `full` reduced into `reduced` (`full` halved some number of times): a reduced pixel is the
+/// largest of the full pixels it covers (a mask keeps every marked pixel); the rows and columns
+/// beyond the reduced image's cover (odd sides) are left out.
+pub(crate) fn reduce_mask_max(full: &Mask, reduced: &mut Mask) {
+    let (rw, rh) = (reduced.width(), reduced.height());
+    if rw == 0 || rh == 0 {
+        return;
+    }
+    let block = (full.width() / rw).max(1);
+    reduced.fill(0);
+    let rows = full.as_slice().chunks_exact(full.width()).take(rh * block);
+    for (y, row) in rows.enumerate() {
+        let out = reduced.row_mut(y / block);
+        for (o, cover) in out.iter_mut().zip(row.chunks_exact(block)) {
+            *o = cover.iter().fold(*o, |m, &v| m.max(v));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn enlarged_images_repeat_each_reduced_pixel_and_cover_odd_sides() {
+        let mut reduced = Mask::filled(ImageSize::new(3, 2), 0);
+        reduced.as_mut_slice().copy_from_slice(&[1, 0, 2, 0, 3, 0]);
+        let mut full = Mask::filled(ImageSize::new(7, 5), 9);
+        copy_or_enlarge(&reduced, &mut full);
+        let expected: [[u8; 7]; 5] = [
+            [1, 1, 0, 0, 2, 2, 2],
+            [1, 1, 0, 0, 2, 2, 2],
+            [0, 0, 3, 3, 0, 0, 0],
+            [0, 0, 3, 3, 0, 0, 0],
+            [0, 0, 3, 3, 0, 0, 0],
+        ];
+        assert_eq!(full.as_slice(), expected.concat().as_slice());
+    }
+
+    #[test]
+    fn a_reduced_mask_keeps_every_marked_block_and_enlarges_back_over_it() {
+        let size = ImageSize::new(9, 8);
+        let mut full = Mask::filled(size, 0);
+        full.set(5, 2, 255);
+        full.set(0, 7, 255);
+        full.set(8, 0, 255); // beyond the 4-px-block cover of a 9-px side: left out
+        let mut reduced = Mask::filled(level_size(size, 2), 0);
+        reduce_mask_max(&full, &mut reduced);
+        assert_eq!(reduced.as_slice(), &[0, 255, 255, 0]);
+        let mut back = Mask::filled(size, 0);
+        copy_or_enlarge(&reduced, &mut back);
+        for y in 0..8 {
+            for x in 0..9 {
+                if full.get(x, y) != 0 && x < 8 {
+                    assert_eq!(back.get(x, y), 255, "({x}, {y})");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn halvings_stop_before_the_short_side_falls_below_the_minimum() {
+        let vga = ImageSize::new(640, 480);
+        assert_eq!(halvings_keeping_side(vga, 240, usize::MAX), 1);
+        assert_eq!(halvings_keeping_side(vga, 241, usize::MAX), 0);
+        assert_eq!(halvings_keeping_side(vga, 120, 1), 1);
+        assert_eq!(
+            halvings_keeping_side(ImageSize::new(1280, 720), 240, usize::MAX),
+            1
+        );
+        assert_eq!(
+            halvings_keeping_side(ImageSize::new(1920, 1080), 240, usize::MAX),
+            2
+        );
+    }
+}
