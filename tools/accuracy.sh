@@ -98,7 +98,8 @@ section_failure_classes() {
   echo "and \`… --size 640x480 --modes dvo_offline --scenarios failure,held_out --json G\`; the preset"
   echo "column: \`… --size 320x240 --modes dvo_offline --scenarios failure,held_out --no-default"
   echo "--config far_layer=tools/detector_configs/far_layer.json\` (opt-in, method.md D21);"
-  echo "\`tests/integration/detector_synthetic.rs\` holds bounds on the default mode at 320×240."
+  echo "\`tests/integration/detector_synthetic.rs\` holds bounds on the default mode at 320×240. At"
+  echo "640×480 the offline mode works at 320×240 and enlarges its masks (method.md D24)."
   echo
   "$EX/scenario_accuracy" --size 320x240 --scenarios failure,held_out --json "$WORK/fc_qvga.json" \
     > /dev/null 2>&1
@@ -340,7 +341,7 @@ section_bonn_crowd_200() {
   echo "| pose source | mode | ATE RMSE | rotation RPE over 30 frames | mask F1 | precision | recall |"
   echo "|---|---|---|---|---|---|---|"
   sed -n 's/^.*bonn_crowd_200 \([A-Za-z]*\) \([A-Za-z_.,]*\): ATE \([0-9.]*\) m, rotation RPE (30 frames) \([0-9.]*\)°, masks F1 \([0-9.]*\) P \([0-9.]*\) R \([0-9.]*\)$/| \1 | \2 | \3 m | \4° | \5 | \6 | \7 |/p' "$WORK/bonn.txt" \
-    | sed 's/| DvoClosedLoop |/| DVO closed loop |/; s/| DvoUnmasked |/| DVO without the mask |/; s/| Offline |/| offline (default) |/; s/| Offline,far_layer.json |/| offline, far_layer.json (D21) |/; s/| Causal |/| causal (`--causal`) |/'
+    | sed 's/| DvoClosedLoop |/| DVO closed loop |/; s/| DvoUnmasked |/| DVO without the mask |/; s/| Offline |/| offline (default) |/; s/| Offline,far_layer.json |/| offline, far_layer.json (D21) |/; s/| Offline,full_resolution |/| offline, `--full-resolution` (D24) |/; s/| Causal |/| causal (`--causal`) |/'
   echo
 }
 

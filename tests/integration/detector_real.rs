@@ -18,6 +18,7 @@ use nalgebra::Isometry3;
 use occmask::geometry::PinholeIntrinsics;
 use occmask::image_buf::ImageSize;
 use occmask::occlusion::{OcclusionConfig, OcclusionDetector};
+use occmask::pipeline::offline::ColourRegistration;
 use occmask::pipeline::{FrameInput, FrameOutput, ProcessingMode, ProcessorConfig, SequenceProcessor};
 use occmask::trajectory::interpolate;
 
@@ -125,14 +126,19 @@ fn seven_scenes_redkitchen_static_with_ground_truth_poses_has_few_false_positive
     check("7scenes_redkitchen_300", &fractions, 0.01);
 }
 
-/// The causal closed loop (DVO poses, mask fed back; `ProcessorConfig::default()` in the causal
-/// mode) over a TUM-layout folder: each frame's false-positive fraction (a static scene) and how
-/// many DVO estimates did not converge.
-fn causal_closed_loop_fractions(dir: &Path, intrinsics: PinholeIntrinsics) -> (Vec<f64>, usize) {
+/// The closed loop (DVO poses, mask fed back; `ProcessorConfig::default()` in `mode`, as
+/// `occmask process` runs it) over a TUM-layout folder: each frame's false-positive fraction (a
+/// static scene), how many DVO estimates did not converge, and the offline mode's registration
+/// decision.
+fn closed_loop_fractions(
+    dir: &Path,
+    intrinsics: PinholeIntrinsics,
+    mode: ProcessingMode,
+) -> (Vec<f64>, usize, Option<ColourRegistration>) {
     let sequence = TumSequence::load(dir).unwrap();
     let size = ImageSize::new(640, 480);
     let config = ProcessorConfig {
-        mode: ProcessingMode::Causal,
+        mode,
         ..ProcessorConfig::default()
     };
     let mut processor = SequenceProcessor::new(size, intrinsics, config).unwrap();
@@ -158,7 +164,8 @@ fn causal_closed_loop_fractions(dir: &Path, intrinsics: PinholeIntrinsics) -> (V
         };
         processor.push(&input, &mut keep).unwrap();
     }
-    (fractions, failures)
+    processor.finish(&mut keep).unwrap();
+    (fractions, failures, processor.colour_registration())
 }
 
 /// The closed loop on TUM fr2_desk: colour and depth are registered, so DVO can run. Reported
@@ -171,8 +178,11 @@ fn tum_fr2_desk_static_with_dvo_poses_has_few_false_positives() {
     ) else {
         return;
     };
-    let (fractions, failures) =
-        causal_closed_loop_fractions(&dir, PinholeIntrinsics::new(520.9, 521.0, 325.1, 249.7));
+    let (fractions, failures, _) = closed_loop_fractions(
+        &dir,
+        PinholeIntrinsics::new(520.9, 521.0, 325.1, 249.7),
+        ProcessingMode::Causal,
+    );
     assert_eq!(failures, 0);
     check("tum_fr2_desk_50 (DVO closed loop)", &fractions, 0.01);
 }
@@ -191,8 +201,11 @@ fn seven_scenes_redkitchen_causal_closed_loop_with_keyframes_has_few_false_posit
     ) else {
         return;
     };
-    let (fractions, failures) =
-        causal_closed_loop_fractions(&dir, PinholeIntrinsics::new(585.0, 585.0, 320.0, 240.0));
+    let (fractions, failures, _) = closed_loop_fractions(
+        &dir,
+        PinholeIntrinsics::new(585.0, 585.0, 320.0, 240.0),
+        ProcessingMode::Causal,
+    );
     assert_eq!(failures, 0);
     let (mean, worst, _) = summarise(
         "7scenes_redkitchen_300 (DVO closed loop, causal)",
@@ -219,28 +232,11 @@ fn seven_scenes_redkitchen_offline_closed_loop_finds_the_colour_unregistered() {
     ) else {
         return;
     };
-    let sequence = TumSequence::load(&dir).unwrap();
-    let intrinsics = PinholeIntrinsics::new(585.0, 585.0, 320.0, 240.0);
-    let size = ImageSize::new(640, 480);
-    let mut processor = SequenceProcessor::new(size, intrinsics, ProcessorConfig::default()).unwrap();
-    let mut fractions = Vec::new();
-    let mut keep = |out: FrameOutput<'_>| {
-        fractions.push(out.stats.moving_fraction);
-        Ok(())
-    };
-    for pair in sequence.depth_with_nearest_color() {
-        let frame = sequence.decode(&pair).unwrap();
-        let input = FrameInput {
-            timestamp_ns: frame.depth_timestamp_ns,
-            gray: &frame.gray,
-            depth_m: &frame.depth_m,
-            world_from_marker: None,
-            ignore_in_previous: None,
-        };
-        processor.push(&input, &mut keep).unwrap();
-    }
-    processor.finish(&mut keep).unwrap();
-    let registration = processor.colour_registration();
+    let (fractions, _, registration) = closed_loop_fractions(
+        &dir,
+        PinholeIntrinsics::new(585.0, 585.0, 320.0, 240.0),
+        ProcessingMode::Offline,
+    );
     assert_eq!(
         registration.map(|r| r.registered),
         Some(false),
@@ -463,10 +459,10 @@ mod bonn_crowd {
     /// ATE 0.044 m, F1 0.912 (the default working resolution: 0.039 m, 0.858). Its masks stay
     /// the more complete: held to the default's pose bounds and a higher F1 bound.
     #[test]
-    fn offline_closed_loop_at_full_resolution_masks_more_of_the_people() {
+    fn offline_closed_loop_without_halving_masks_more_of_the_people() {
         let Some(dir) = data::real_data(
             "bonn_crowd_200",
-            "detector_real::bonn_crowd::offline_closed_loop_at_full_resolution_masks_more_of_the_people",
+            "detector_real::bonn_crowd::offline_closed_loop_without_halving_masks_more_of_the_people",
         ) else {
             return;
         };
@@ -477,7 +473,7 @@ mod bonn_crowd {
             PoseSource::DvoClosedLoop,
             ProcessingMode::Offline,
             config,
-            ",full resolution",
+            ",full_resolution",
         );
         assert!(full.ate_m <= OFFLINE_ATE_BOUND_M, "ATE {:.4} m", full.ate_m);
         assert!(full.rotation_rpe_30_deg <= OFFLINE_ROTATION_RPE_BOUND_DEG);

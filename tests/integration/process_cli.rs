@@ -26,6 +26,32 @@ fn fixture(dir: &Path, name: &str, flavor: Flavor) -> PathBuf {
     path
 }
 
+/// The TUM excerpt converted into `dir` (`desk.mcap`).
+fn converted_tum_fixture(dir: &Path) -> PathBuf {
+    let desk = dir.join("desk.mcap");
+    let out = occmask(&[
+        "convert".as_ref(),
+        "tum".as_ref(),
+        crate::common::data::tum_fixture().as_os_str(),
+        "-q".as_ref(),
+        "-o".as_ref(),
+        desk.as_os_str(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    desk
+}
+
+/// The processor configuration `process` recorded in `output`'s metadata.
+fn recorded_processor_config(output: &Path) -> occmask::pipeline::ProcessorConfig {
+    use occmask::mcap_io::annotate::{METADATA_PROCESS, METADATA_PROCESSOR_CONFIG};
+    let written = occmask::McapInput::open(output).unwrap();
+    let process = crate::common::recording::metadata(&written)
+        .into_iter()
+        .find(|m| m.name == METADATA_PROCESS)
+        .unwrap();
+    serde_json::from_str(&process.metadata[METADATA_PROCESSOR_CONFIG]).unwrap()
+}
+
 fn occmask<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_occmask"))
         .args(args)
@@ -324,7 +350,6 @@ fn camera_from_marker_moves_external_poses_to_the_camera() {
 /// `processor_config` metadata of the output shows; an unknown field is refused by name.
 #[test]
 fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
-    use occmask::mcap_io::annotate::{METADATA_PROCESS, METADATA_PROCESSOR_CONFIG};
     use occmask::pipeline::ProcessorConfig;
     let dir = tempfile::tempdir().unwrap();
     let input = fixture(dir.path(), "in.mcap", Flavor::Protobuf);
@@ -349,13 +374,7 @@ fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
         "out.mcap",
     );
     assert!(out.status.success(), "{}", stderr(&out));
-    let written = occmask::McapInput::open(&output).unwrap();
-    let process = crate::common::recording::metadata(&written)
-        .into_iter()
-        .find(|m| m.name == METADATA_PROCESS)
-        .unwrap();
-    let recorded: ProcessorConfig =
-        serde_json::from_str(&process.metadata[METADATA_PROCESSOR_CONFIG]).unwrap();
+    let recorded = recorded_processor_config(&output);
     let mut expected = ProcessorConfig::default();
     expected.offline.refinement_dvo.max_iterations_per_level = 7;
     assert_eq!(recorded, expected);
@@ -369,22 +388,55 @@ fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
     assert!(!output.exists());
 }
 
+/// The offline mode processes VGA at 320×240 and writes masks at the input's size;
+/// `--full-resolution` processes it as it is (recorded in the output's `processor_config`); it
+/// is refused beside `--causal`, which always runs at full resolution.
+#[test]
+fn full_resolution_is_recorded_and_both_write_masks_at_the_input_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    let desk = converted_tum_fixture(tmp.path());
+    let run = |name: &str, extra: &[&str]| {
+        let output = tmp.path().join(format!("{name}.mcap"));
+        let masks = tmp.path().join(name);
+        let mut args = vec![
+            "process".as_ref(),
+            desk.as_os_str(),
+            "-o".as_ref(),
+            output.as_os_str(),
+            "-q".as_ref(),
+            "--export-masks".as_ref(),
+            masks.as_os_str(),
+        ];
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        let out = occmask(&args);
+        (out, output, masks)
+    };
+    for (name, extra, working_side) in [("default", &[][..], 240), ("full", &["--full-resolution"][..], 0)] {
+        let (out, output, masks) = run(name, extra);
+        assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+        let recorded = recorded_processor_config(&output);
+        assert_eq!(recorded.offline.min_working_side_px, working_side, "{name}");
+        let pngs = files_in(&masks);
+        assert_eq!(pngs.len(), 10, "{name}");
+        for png in &pngs {
+            let png = image::open(masks.join(png)).unwrap().into_luma8();
+            assert_eq!((png.width(), png.height()), (640, 480), "{name}");
+        }
+    }
+
+    let (out, output, _) = run("causal", &["--full-resolution", "--causal"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--causal"), "{}", stderr(&out));
+    assert!(!output.exists());
+}
+
 /// The offline mode's colour/depth registration check (docs/method.md D18) reports what it
 /// decided: 7-Scenes (colour not registered to depth; its first 3.5 s) gets a warning naming the
 /// score and the flag that turns the check off, the registered TUM excerpt none.
 #[test]
 fn an_unregistered_recording_is_reported_and_a_registered_one_is_not() {
     let tmp = tempfile::tempdir().unwrap();
-    let desk = tmp.path().join("desk.mcap");
-    let out = occmask(&[
-        "convert".as_ref(),
-        "tum".as_ref(),
-        crate::common::data::tum_fixture().as_os_str(),
-        "-q".as_ref(),
-        "-o".as_ref(),
-        desk.as_os_str(),
-    ]);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let desk = converted_tum_fixture(tmp.path());
     let annotated = tmp.path().join("desk.out.mcap");
     let out = occmask(&[
         "process".as_ref(),
