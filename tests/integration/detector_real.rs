@@ -315,6 +315,27 @@ mod bonn_crowd {
         rotation_rpe_30_deg: f64,
     }
 
+    impl Run {
+        /// The offline closed loop's pose bounds, and `min_f1` on the masks.
+        fn assert_offline_bounds(&self, what: &str, min_f1: f64) {
+            assert!(
+                self.ate_m <= OFFLINE_ATE_BOUND_M,
+                "{what} ATE {:.4} m",
+                self.ate_m
+            );
+            assert!(
+                self.rotation_rpe_30_deg <= OFFLINE_ROTATION_RPE_BOUND_DEG,
+                "{what} rotation RPE {:.2}°",
+                self.rotation_rpe_30_deg
+            );
+            assert!(
+                self.masks.mean_f1 >= min_f1,
+                "{what} F1 {:.3}",
+                self.masks.mean_f1
+            );
+        }
+    }
+
     fn run(sequence: &Sequence, source: PoseSource, mode: ProcessingMode) -> Run {
         run_with(sequence, source, mode, ProcessorConfig::default(), "")
     }
@@ -398,22 +419,12 @@ mod bonn_crowd {
         let causal = run(sequence, PoseSource::DvoClosedLoop, ProcessingMode::Causal);
         assert_eq!(closed.poses.len(), 200);
         // Bounds: measured values in docs/accuracy.md ("Bonn crowd"), each with its margin.
-        assert!(
-            closed.ate_m <= OFFLINE_ATE_BOUND_M,
-            "offline ATE {:.4} m",
-            closed.ate_m
-        );
+        closed.assert_offline_bounds("offline", OFFLINE_F1_BOUND);
         assert!(
             closed.ate_m <= unmasked.ate_m / 3.0,
             "offline ATE {:.4} m vs unmasked {:.4} m",
             closed.ate_m,
             unmasked.ate_m
-        );
-        assert!(closed.rotation_rpe_30_deg <= OFFLINE_ROTATION_RPE_BOUND_DEG);
-        assert!(
-            closed.masks.mean_f1 >= OFFLINE_F1_BOUND,
-            "offline F1 {:.3}",
-            closed.masks.mean_f1
         );
         assert!(
             causal.ate_m <= CAUSAL_ATE_BOUND_M,
@@ -446,13 +457,7 @@ mod bonn_crowd {
             preset,
             ",far_layer.json",
         );
-        assert!(far.ate_m <= OFFLINE_ATE_BOUND_M, "ATE {:.4} m", far.ate_m);
-        assert!(far.rotation_rpe_30_deg <= OFFLINE_ROTATION_RPE_BOUND_DEG);
-        assert!(
-            far.masks.mean_f1 >= OFFLINE_F1_BOUND,
-            "F1 {:.3}",
-            far.masks.mean_f1
-        );
+        far.assert_offline_bounds("far_layer.json", OFFLINE_F1_BOUND);
     }
 
     /// The offline mode at full resolution (`--full-resolution`, docs/method.md D24): measured
@@ -475,13 +480,7 @@ mod bonn_crowd {
             config,
             ",full_resolution",
         );
-        assert!(full.ate_m <= OFFLINE_ATE_BOUND_M, "ATE {:.4} m", full.ate_m);
-        assert!(full.rotation_rpe_30_deg <= OFFLINE_ROTATION_RPE_BOUND_DEG);
-        assert!(
-            full.masks.mean_f1 >= FULL_RESOLUTION_F1_BOUND,
-            "F1 {:.3}",
-            full.masks.mean_f1
-        );
+        full.assert_offline_bounds("--full-resolution", FULL_RESOLUTION_F1_BOUND);
     }
 
     // Measured (docs/accuracy.md): offline ATE 0.039 m, rotation RPE 1.06°, F1 0.858; causal
