@@ -167,7 +167,13 @@ fn frame_loop_share(_c: &mut Criterion) {
             rectify += map_back(results);
         }
         let start = Instant::now();
-        let results = processor.finish().unwrap();
+        let mut results = Vec::new();
+        processor
+            .finish(&mut |r| {
+                results.push(r);
+                Ok(())
+            })
+            .unwrap();
         pipeline += start.elapsed();
         rectify += map_back(results);
         let n = frames.len() as f64;

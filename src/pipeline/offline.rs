@@ -331,6 +331,11 @@ struct Buffered {
 /// runs the refinement pass (hence `Send`).
 pub type Emit<'e> = dyn FnMut(FrameOutput<'_>) -> Result<()> + Send + 'e;
 
+/// Where results go when nothing runs beside the caller (the end of the sequence, and the
+/// passes that [`Emit`] reaches through): as [`Emit`], but only ever called on the caller's
+/// thread, so it need not be `Send`.
+pub type Sink<'e> = dyn FnMut(FrameOutput<'_>) -> Result<()> + 'e;
+
 /// Sequence processor of the offline mode (see the module docs).
 ///
 /// Pass 1 is a chain over the frames as they arrive; the backward and refinement passes are a
@@ -635,7 +640,7 @@ impl OfflineProcessor {
     ///
     /// # Errors
     /// As [`Self::push`].
-    pub fn finish(&mut self, emit: &mut Emit<'_>) -> Result<()> {
+    pub fn finish(&mut self, emit: &mut Sink<'_>) -> Result<()> {
         self.check_registration(None)?;
         let later = &mut self.later;
         later.refine_ready(later.ready.len(), emit)?;
@@ -788,7 +793,7 @@ impl LaterPasses {
     }
 
     /// Pass 3 and `emit` for the first `count` waiting frames, which are then recycled.
-    fn refine_ready(&mut self, count: usize, emit: &mut Emit<'_>) -> Result<()> {
+    fn refine_ready(&mut self, count: usize, emit: &mut Sink<'_>) -> Result<()> {
         for _ in 0..count {
             let Some(frame) = self.ready.pop_front() else {
                 break;
@@ -801,7 +806,7 @@ impl LaterPasses {
     }
 
     /// Pass 3 for one frame, then `emit` with the refinement ∪ backward mask.
-    fn refine_and_emit(&mut self, frame: &Buffered, emit: &mut Emit<'_>) -> Result<()> {
+    fn refine_and_emit(&mut self, frame: &Buffered, emit: &mut Sink<'_>) -> Result<()> {
         dequantize_gray_into(&frame.gray, &mut self.gray);
         let closed_loop = self.source == PoseSource::DvoClosedLoop;
         let replayed_pose = match self.source {

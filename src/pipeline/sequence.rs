@@ -12,7 +12,7 @@
 
 #[cfg(doc)]
 use super::offline::OfflineConfig;
-use super::offline::{ColourRegistration, Emit, OfflineProcessor};
+use super::offline::{ColourRegistration, Emit, OfflineProcessor, Sink};
 use super::reduce::{copy_or_enlarge, halvings_keeping_side, reduce_mask_max, Reduced};
 use super::{check_size, FrameInput, FrameOutput, ProcessingMode, Processor, ProcessorConfig};
 use crate::error::Result;
@@ -136,7 +136,7 @@ impl SequenceProcessor {
     ///
     /// # Errors
     /// Whatever the processor reports, and `emit`'s errors.
-    pub fn finish(&mut self, emit: &mut Emit<'_>) -> Result<()> {
+    pub fn finish(&mut self, emit: &mut Sink<'_>) -> Result<()> {
         let Some(working) = &mut self.working else {
             return self.pipeline.finish(emit);
         };
@@ -166,7 +166,7 @@ impl Pipeline {
         }
     }
 
-    fn finish(&mut self, emit: &mut Emit<'_>) -> Result<()> {
+    fn finish(&mut self, emit: &mut Sink<'_>) -> Result<()> {
         match self {
             Pipeline::Causal(_) => Ok(()),
             Pipeline::Offline(processor) => processor.finish(emit),

@@ -21,12 +21,13 @@ pub trait FrameProcessor {
     /// Whatever the algorithm reports (e.g. size mismatches).
     fn push(&mut self, frame: &FrameInput<'_>) -> Result<Vec<FrameResult>>;
 
-    /// The results still pending at the end of the input, oldest first.
+    /// Hands the results still pending at the end of the input to `sink`, oldest first, each
+    /// as soon as it is final (so writing them overlaps the work on the later ones).
     ///
     /// # Errors
-    /// As [`Self::push`].
-    fn finish(&mut self) -> Result<Vec<FrameResult>> {
-        Ok(Vec::new())
+    /// As [`Self::push`], and whatever `sink` returns.
+    fn finish(&mut self, _sink: &mut FrameSink<'_>) -> Result<()> {
+        Ok(())
     }
 
     /// What the offline mode's colour/depth registration check decided (`None` where it did
@@ -35,6 +36,9 @@ pub trait FrameProcessor {
         None
     }
 }
+
+/// Takes the results of [`FrameProcessor::finish`] one at a time.
+pub type FrameSink<'a> = dyn FnMut(FrameResult) -> Result<()> + 'a;
 
 /// Builds the processor once intrinsics and image size are known, from
 /// [`ProcessConfig::processor`] (pose source included).
@@ -85,14 +89,10 @@ impl FrameProcessor for PipelineProcessor {
         Ok(done)
     }
 
-    fn finish(&mut self) -> Result<Vec<FrameResult>> {
+    fn finish(&mut self, sink: &mut FrameSink<'_>) -> Result<()> {
         let keep_accumulation = self.keep_accumulation;
-        let mut done = Vec::new();
-        self.pipeline.finish(&mut |out| {
-            done.push(out.to_result(keep_accumulation));
-            Ok(())
-        })?;
-        Ok(done)
+        self.pipeline
+            .finish(&mut |out| sink(out.to_result(keep_accumulation)))
     }
 
     fn colour_registration(&self) -> Option<ColourRegistration> {

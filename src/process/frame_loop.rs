@@ -110,14 +110,21 @@ impl FrameLoop {
             }
         }
         if end_of_stream {
-            if let Some(processor) = &mut self.processor {
+            if let Some(mut processor) = self.processor.take() {
                 let pipeline_start = Instant::now();
-                let results = processor.finish()?;
-                self.report.timings.pipeline_s += pipeline_start.elapsed().as_secs_f64();
+                let mut writing_s = 0.0;
+                // Each result is written as it becomes final, so the writer thread compresses
+                // while the processor finishes the later frames.
+                let finished = processor.finish(&mut |result| {
+                    let write_start = Instant::now();
+                    let written = self.write_result(ctx, output, hooks, result);
+                    writing_s += write_start.elapsed().as_secs_f64();
+                    written
+                });
+                self.report.timings.pipeline_s += pipeline_start.elapsed().as_secs_f64() - writing_s;
                 self.report.colour_registration = processor.colour_registration();
-                for result in results {
-                    self.write_result(ctx, output, hooks, result)?;
-                }
+                self.processor = Some(processor);
+                finished?;
             }
             if !self.unanchored.is_empty() {
                 self.give_up_anchor(ctx);

@@ -55,7 +55,9 @@ pub mod report;
 mod streams;
 mod threads;
 
-pub use adapter::{pipeline_factory, FrameProcessor, PipelineOptions, PipelineProcessor, ProcessorFactory};
+pub use adapter::{
+    pipeline_factory, FrameProcessor, FrameSink, PipelineOptions, PipelineProcessor, ProcessorFactory,
+};
 pub use config::{
     NoHooks, OdometryAnchor, ProcessConfig, ProcessHooks, DEFAULT_DEPTH_UNITS_PER_METER,
     DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,

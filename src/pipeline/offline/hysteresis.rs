@@ -22,7 +22,7 @@ use std::collections::VecDeque;
 
 use nalgebra::Isometry3;
 
-use super::{Emit, OfflineConfig};
+use super::{OfflineConfig, Sink};
 use crate::error::Result;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, ImageSize, Mask};
@@ -147,7 +147,7 @@ impl Hysteresis {
     pub fn settle(
         &mut self,
         candidates: impl FnOnce(f32, &mut Vec<u8>, &mut Vec<(u32, f32)>),
-        emit: &mut Emit<'_>,
+        emit: &mut Sink<'_>,
     ) -> Result<()> {
         self.settle_with(candidates, emit, Self::sweep)
     }
@@ -156,7 +156,7 @@ impl Hysteresis {
     fn settle_with(
         &mut self,
         candidates: impl FnOnce(f32, &mut Vec<u8>, &mut Vec<(u32, f32)>),
-        emit: &mut Emit<'_>,
+        emit: &mut Sink<'_>,
         sweep: fn(&mut Self),
     ) -> Result<()> {
         if let Some(held) = self.held.back_mut() {
@@ -172,14 +172,14 @@ impl Hysteresis {
     }
 
     /// Emits every held frame (the end of the sequence).
-    pub fn flush(&mut self, emit: &mut Emit<'_>) -> Result<()> {
+    pub fn flush(&mut self, emit: &mut Sink<'_>) -> Result<()> {
         while !self.held.is_empty() {
             self.emit_oldest(emit)?;
         }
         Ok(())
     }
 
-    fn emit_oldest(&mut self, emit: &mut Emit<'_>) -> Result<()> {
+    fn emit_oldest(&mut self, emit: &mut Sink<'_>) -> Result<()> {
         let Some(held) = self.held.pop_front() else {
             return Ok(());
         };
