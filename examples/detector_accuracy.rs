@@ -49,7 +49,7 @@ use occmask::trajectory::interpolate;
 use tum::TumSequence;
 
 /// The default detector config with overrides from the environment (for experiments):
-/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0/1
+/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_THIN_RECONNECT, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0/1
 /// (appearance growth off/on; the default is off), OCC_GROWTH_PHOTO, OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS,
 /// OCC_GROWTH_MARGIN, OCC_GROWTH_RADIUS, OCC_GROWTH_INHERIT=0/1, OCC_GROWTH_SEEDS=0/1 (its parameters).
 fn detector_config() -> OcclusionConfig {
@@ -71,6 +71,9 @@ fn detector_config_from(base: OcclusionConfig) -> OcclusionConfig {
     }
     if let Some(v) = get("OCC_THIN_MARGIN") {
         config.thin_structure_border_margin_px = v;
+    }
+    if let Some(v) = get("OCC_THIN_RECONNECT") {
+        config.thin_structure_reconnect_px = v;
     }
     match get("OCC_GROWTH") {
         Some(0) => config.appearance_growth = None,

@@ -134,13 +134,15 @@ struct ThinStructureFilter<'a> {
 
 impl ThinStructureFilter<'_> {
     /// Thin-structure filter (see `OcclusionConfig::thin_structure_radius_px`): opening of the
-    /// object set (inside its bounding box `bounds`) with a (2r+1)² square. Object pixels not
-    /// covered by the opening and farther than `border_margin_px` from the image border (where
+    /// object set (inside its bounding box `bounds`) with a (2r+1)² square, then
+    /// `reconnect_px` 3×3 dilations each intersected with the set (the set's pixels within that
+    /// geodesic distance of the opening rejoin it). Object pixels not covered by the result and farther than `border_margin_px` from the image border (where
     /// an object entering the view first appears as a thin sliver) leave the object set and lose
     /// their accumulation, like small components. Returns the pixels erased.
     fn erase(
         self,
         radius: usize,
+        reconnect_px: usize,
         border_margin_px: usize,
         bounds: PixelBounds,
         accumulation_m: &mut DepthMeters,
@@ -160,6 +162,16 @@ impl ThinStructureFilter<'_> {
         );
         square_rows(opened, box_width, scratch, box_width, box_height, radius, false);
         square_columns(scratch, opened, box_width, box_height, radius, false);
+        // Geodesic dilation inside the set: one 3×3 dilation masked by the set per pixel.
+        for _ in 0..reconnect_px {
+            square_rows(opened, box_width, scratch, box_width, box_height, 1, false);
+            square_columns(scratch, opened, box_width, box_height, 1, false);
+            for (opened_row, set_row) in opened.chunks_exact_mut(box_width).zip(set_box.chunks(width)) {
+                for (o, &s) in opened_row.iter_mut().zip(set_row) {
+                    *o &= s;
+                }
+            }
+        }
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
         // Interior columns of the box (pixels nearer the border than the margin are kept).
@@ -360,6 +372,7 @@ impl Components {
                 0 => 0,
                 radius => thin.erase(
                     radius,
+                    config.thin_structure_reconnect_px,
                     config.thin_structure_border_margin_px,
                     bounds,
                     accumulation_m,

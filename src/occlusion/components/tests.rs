@@ -371,7 +371,7 @@ fn thin_structure_opening_on_the_bounding_box_matches_the_whole_image() {
         y0: 0,
         y1: size.height - 1,
     };
-    for (radius, margin) in [(1, 0), (1, 12), (2, 3)] {
+    for (radius, reconnect, margin) in [(1, 0, 0), (1, 0, 12), (2, 0, 3), (1, 2, 0), (2, 3, 5)] {
         let run = |bounds: PixelBounds| {
             let mut components = Components::new(size);
             components.object_set.copy_from_slice(&set);
@@ -379,12 +379,85 @@ fn thin_structure_opening_on_the_bounding_box_matches_the_whole_image() {
             let erased = components
                 .thin_filter_and_targets()
                 .0
-                .erase(radius, margin, bounds, &mut a);
+                .erase(radius, reconnect, margin, bounds, &mut a);
             (erased, components.object_set, a.into_vec())
         };
         let (fast, slow) = (run(bounding), run(whole));
         assert!(slow.0 > 0, "radius {radius}");
-        assert_eq!(fast, slow, "radius {radius} margin {margin}");
+        assert_eq!(
+            fast, slow,
+            "radius {radius} reconnect {reconnect} margin {margin}"
+        );
+    }
+}
+
+/// The reconnection keeps exactly the set's pixels within `reconnect` steps of the opening
+/// along 8-connected paths through the set (breadth-first search from the opening), and with
+/// more steps never fewer.
+#[test]
+fn thin_structure_reconnection_keeps_the_set_within_its_geodesic_distance_of_the_opening() {
+    let size = ImageSize::new(53, 41);
+    let (width, height) = (size.width, size.height);
+    let mut state = 2024u64;
+    let mut previous_kept = 0;
+    let set: Vec<u8> = (0..size.area())
+        .map(|i| {
+            let (x, y) = (i % width, i / width);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            // A solid block with a one-pixel limb, scattered noise and a detached strip.
+            let block = (8..20).contains(&x) && (8..20).contains(&y);
+            let limb = y == 14 && (20..40).contains(&x);
+            let strip = x == 45 && (5..35).contains(&y);
+            u8::from(block || limb || strip || (state >> 33) % 10 < 3)
+        })
+        .collect();
+    let whole = PixelBounds {
+        x0: 0,
+        x1: width - 1,
+        y0: 0,
+        y1: height - 1,
+    };
+    let eroded = square_filter_scalar(&set, width, height, 1, true);
+    let opened = square_filter_scalar(&eroded, width, height, 1, false);
+    for reconnect in 0..5 {
+        // Breadth-first search from the opening through the set, `reconnect` rings deep.
+        let mut distance: Vec<Option<usize>> = opened.iter().map(|&o| (o != 0).then_some(0)).collect();
+        let mut frontier: Vec<usize> = (0..set.len()).filter(|&i| opened[i] != 0).collect();
+        for ring in 1..=reconnect {
+            let mut next = Vec::new();
+            for &i in &frontier {
+                let (x, y) = ((i % width) as isize, (i / width) as isize);
+                for (dx, dy) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))) {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= width as isize || ny >= height as isize {
+                        continue;
+                    }
+                    let n = ny as usize * width + nx as usize;
+                    if set[n] != 0 && distance[n].is_none() {
+                        distance[n] = Some(ring);
+                        next.push(n);
+                    }
+                }
+            }
+            frontier = next;
+        }
+        let mut components = Components::new(size);
+        components.object_set.copy_from_slice(&set);
+        let mut a = DepthMeters::filled(size, 1.0);
+        let erased = components
+            .thin_filter_and_targets()
+            .0
+            .erase(1, reconnect, 0, whole, &mut a);
+        let expected: Vec<u8> = distance.iter().map(|d| u8::from(d.is_some())).collect();
+        assert_eq!(components.object_set, expected, "reconnect {reconnect}");
+        let kept = expected.iter().filter(|&&k| k != 0).count();
+        assert_eq!(erased, set.iter().filter(|&&s| s != 0).count() - kept);
+        assert!(kept >= previous_kept, "reconnect {reconnect}");
+        // The limb is kept `reconnect` pixels out from the block's opening; the strip is gone.
+        assert_eq!(components.object_set[14 * width + 45], 0, "reconnect {reconnect}");
+        previous_kept = kept;
     }
 }
 
