@@ -49,9 +49,10 @@ use occmask::trajectory::interpolate;
 use tum::TumSequence;
 
 /// The default detector config with overrides from the environment (for experiments):
-/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_THIN_RECONNECT, OCC_MOTION_CHECK=0 (off), OCC_GROWTH=0/1
-/// (appearance growth off/on; the default is off), OCC_GROWTH_PHOTO, OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS,
-/// OCC_GROWTH_MARGIN, OCC_GROWTH_RADIUS, OCC_GROWTH_INHERIT=0/1, OCC_GROWTH_SEEDS=0/1 (its parameters).
+/// OCC_EXIT_MARGIN, OCC_THIN_RADIUS, OCC_THIN_MARGIN, OCC_THIN_RECONNECT, OCC_MOTION_CHECK=0
+/// (off), OCC_GROWTH=0/1 (appearance growth off/on; the default is off), OCC_GROWTH_PHOTO,
+/// OCC_GROWTH_DEPTH, OCC_GROWTH_RINGS, OCC_GROWTH_MARGIN, OCC_GROWTH_RADIUS,
+/// OCC_GROWTH_INHERIT=0/1, OCC_GROWTH_SEEDS=0/1 (its parameters).
 fn detector_config() -> OcclusionConfig {
     detector_config_from(OcclusionConfig::default())
 }

@@ -176,7 +176,7 @@ const EXIT_MARGIN_PX: usize = 8;
 /// or 0.1, at frame 10 with 0.5; no other class moves by more than 0.001 in F1.
 const EXIT_MIN_OBJECT_FRACTION: f32 = 0.25;
 
-/// Default `thin_structure_reconnect_px`. Measured (docs/method.md D6): on people walking past
+/// Default `thin_structure_reconnect_px`. Measured (docs/method.md D25): on people walking past
 /// the camera (Bonn "crowd", offline at 320×240) the masks' F1 went 0.858 → 0.929 with 2 px and
 /// 0.940 with 4 px, the closed loop's ATE 0.041 → 0.041 m and 0.044 m; the opening off entirely
 /// scored 0.944 but drifted (0.264 m). Static recordings: 7-Scenes offline unchanged (mean

@@ -199,7 +199,8 @@ pub const FAR_LAYER_QUANTILE: f64 = 0.9;
 /// size, 320×240 as it is. On people walking past a hand-held VGA camera (Bonn "crowd") the
 /// offline mode ran at 1.7× the frames/s of full resolution, its closed loop as accurate (ATE
 /// 0.038 m against 0.046 m) and its masks a little less complete (F1 0.929 against 0.938;
-/// docs/method.md D24, D25); 240 px is also the smallest short side at which the slow-change evidence runs.
+/// docs/method.md D24, D25); 240 px is also the smallest short side at which the slow-change
+/// evidence runs.
 pub const DEFAULT_MIN_WORKING_SIDE_PX: usize = 240;
 
 /// The smallest [`OfflineConfig::min_working_side_px`] other than 0: below it an object of the

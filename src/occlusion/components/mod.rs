@@ -136,9 +136,10 @@ impl ThinStructureFilter<'_> {
     /// Thin-structure filter (see `OcclusionConfig::thin_structure_radius_px`): opening of the
     /// object set (inside its bounding box `bounds`) with a (2r+1)² square, then
     /// `reconnect_px` 3×3 dilations each intersected with the set (the set's pixels within that
-    /// geodesic distance of the opening rejoin it). Object pixels not covered by the result and farther than `border_margin_px` from the image border (where
-    /// an object entering the view first appears as a thin sliver) leave the object set and lose
-    /// their accumulation, like small components. Returns the pixels erased.
+    /// geodesic distance of the opening rejoin it). Object pixels not covered by the result and
+    /// farther than `border_margin_px` from the image border (where an object entering the view
+    /// first appears as a thin sliver) leave the object set and lose their accumulation, like
+    /// small components. Returns the pixels erased.
     fn erase(
         self,
         radius: usize,
@@ -162,7 +163,7 @@ impl ThinStructureFilter<'_> {
         );
         square_rows(opened, box_width, scratch, box_width, box_height, radius, false);
         square_columns(scratch, opened, box_width, box_height, radius, false);
-        // Geodesic dilation inside the set: one 3×3 dilation masked by the set per pixel.
+        // Geodesic dilation inside the set: each step a 3×3 dilation masked by the set.
         for _ in 0..reconnect_px {
             square_rows(opened, box_width, scratch, box_width, box_height, 1, false);
             square_columns(scratch, opened, box_width, box_height, 1, false);
