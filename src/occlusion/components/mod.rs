@@ -106,6 +106,33 @@ pub(super) fn position_zero_u8(values: &[u8]) -> Option<usize> {
 }
 
 /// Columns and rows of `bounds`.
+/// Opening of the 0 / 1 image `set_box` (row y at `set_box[y * stride]`, `width` × `height`,
+/// outside counts as 0) with a (2r+1)² square into `opened` (compact rows), then `reconnect_px`
+/// 3×3 dilations each intersected with the set: the set's pixels within that geodesic distance
+/// (8-connected paths inside the set) of the opening rejoin it. `scratch` holds the row passes.
+fn open_reconnected(
+    set_box: &[u8],
+    stride: usize,
+    (width, height): (usize, usize),
+    radius: usize,
+    reconnect_px: usize,
+    scratch: &mut [u8],
+    opened: &mut [u8],
+) {
+    square_filter(set_box, stride, scratch, opened, width, height, radius, true);
+    square_rows(opened, width, scratch, width, height, radius, false);
+    square_columns(scratch, opened, width, height, radius, false);
+    for _ in 0..reconnect_px {
+        square_rows(opened, width, scratch, width, height, 1, false);
+        square_columns(scratch, opened, width, height, 1, false);
+        for (opened_row, set_row) in opened.chunks_exact_mut(width).zip(set_box.chunks(stride)) {
+            for (o, &s) in opened_row.iter_mut().zip(set_row) {
+                *o &= s;
+            }
+        }
+    }
+}
+
 fn box_dims(bounds: PixelBounds) -> (usize, usize) {
     (bounds.x1 - bounds.x0 + 1, bounds.y1 - bounds.y0 + 1)
 }
@@ -156,23 +183,15 @@ impl ThinStructureFilter<'_> {
         let box_area = box_width * box_height;
         let (opened, scratch) = (&mut self.opened[..box_area], &mut self.scratch[..box_area]);
         let set_box = &self.object_set[bounds.y0 * width + bounds.x0..];
-        // Erosion (outside the image counts as background) into `opened`, then dilation; the
-        // filtered images are compact (rows of the box's width).
-        square_filter(
-            set_box, width, scratch, opened, box_width, box_height, radius, true,
+        open_reconnected(
+            set_box,
+            width,
+            (box_width, box_height),
+            radius,
+            reconnect_px,
+            scratch,
+            opened,
         );
-        square_rows(opened, box_width, scratch, box_width, box_height, radius, false);
-        square_columns(scratch, opened, box_width, box_height, radius, false);
-        // Geodesic dilation inside the set: each step a 3×3 dilation masked by the set.
-        for _ in 0..reconnect_px {
-            square_rows(opened, box_width, scratch, box_width, box_height, 1, false);
-            square_columns(scratch, opened, box_width, box_height, 1, false);
-            for (opened_row, set_row) in opened.chunks_exact_mut(box_width).zip(set_box.chunks(width)) {
-                for (o, &s) in opened_row.iter_mut().zip(set_row) {
-                    *o &= s;
-                }
-            }
-        }
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
         // Interior columns of the box (pixels nearer the border than the margin are kept).
@@ -567,11 +586,15 @@ impl Components {
         let (opened, scratch) = (&mut self.morph_a[..box_area], &mut self.morph_b[..box_area]);
         let set_box = &evidence[bounds.y0 * width + bounds.x0..];
         if radius > 0 {
-            square_filter(
-                set_box, width, scratch, opened, box_width, box_height, radius, true,
+            open_reconnected(
+                set_box,
+                width,
+                (box_width, box_height),
+                radius,
+                0,
+                scratch,
+                opened,
             );
-            square_rows(opened, box_width, scratch, box_width, box_height, radius, false);
-            square_columns(scratch, opened, box_width, box_height, radius, false);
         } else {
             for (y, row) in opened.chunks_exact_mut(box_width).enumerate() {
                 row.copy_from_slice(&set_box[y * width..y * width + box_width]);
