@@ -105,7 +105,6 @@ pub(super) fn position_zero_u8(values: &[u8]) -> Option<usize> {
     remainder.iter().position(|&v| v == 0).map(|i| base + i)
 }
 
-/// Columns and rows of `bounds`.
 /// Opening of the 0 / 1 image `set_box` (row y at `set_box[y * stride]`, `width` × `height`,
 /// outside counts as 0) with a (2r+1)² square into `opened` (compact rows), then `reconnect_px`
 /// 3×3 dilations each intersected with the set: the set's pixels within that geodesic distance
@@ -133,6 +132,7 @@ fn open_reconnected(
     }
 }
 
+/// Columns and rows of `bounds`.
 fn box_dims(bounds: PixelBounds) -> (usize, usize) {
     (bounds.x1 - bounds.x0 + 1, bounds.y1 - bounds.y0 + 1)
 }
@@ -585,21 +585,16 @@ impl Components {
         let box_area = box_width * box_height;
         let (opened, scratch) = (&mut self.morph_a[..box_area], &mut self.morph_b[..box_area]);
         let set_box = &evidence[bounds.y0 * width + bounds.x0..];
-        if radius > 0 {
-            open_reconnected(
-                set_box,
-                width,
-                (box_width, box_height),
-                radius,
-                0,
-                scratch,
-                opened,
-            );
-        } else {
-            for (y, row) in opened.chunks_exact_mut(box_width).enumerate() {
-                row.copy_from_slice(&set_box[y * width..y * width + box_width]);
-            }
-        }
+        // Radius 0 copies the evidence (a square filter of radius 0 is the identity).
+        open_reconnected(
+            set_box,
+            width,
+            (box_width, box_height),
+            radius,
+            0,
+            scratch,
+            opened,
+        );
         let count = self
             .runs
             .label(opened, box_width, box_width, box_height, (bounds.x0, bounds.y0));
