@@ -33,6 +33,7 @@
 //! allocate. The per-pixel transport (steps 1–6) is a row-parallel kernel with a scalar
 //! reference ([`transport::transport_scalar`]) and a test that they agree.
 
+pub mod bodies;
 mod components;
 mod config;
 pub mod consistency;

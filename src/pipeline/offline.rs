@@ -21,7 +21,9 @@
 //! 3. **refinement pass** (the block's frames in order): the pipeline again, for the closed loop
 //!    with [`OfflineConfig::refinement_dvo`] ignoring the first pass's forward and backward masks
 //!    of each frame's predecessor as well as its own; otherwise with the first pass's (or the
-//!    external) poses. A frame's mask is the refinement pass's ∪ the backward pass's;
+//!    external) poses. A frame's mask is the refinement pass's ∪ the backward pass's, each
+//!    large enough object in it completed to the depth-connected body it belongs to when that
+//!    body is bounded by depth edges ([`OfflineConfig::body_completion`], docs/method.md D26);
 //! 4. **temporal hysteresis** ([`OfflineConfig::hysteresis_frames`], "confirm later, mark
 //!    earlier"): refined frames are held back that many frames; where a frame's slow-change
 //!    evidence confirms an object, the pixels of the frames before it whose evidence was above
@@ -50,6 +52,7 @@ use crate::error::{Error, Result};
 use crate::geometry::se3::is_finite_pose;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
+use crate::occlusion::bodies::{BodyCompletion, BodyCompletionConfig};
 use crate::occlusion::{OcclusionConfig, OcclusionDetector};
 use crate::pyramid::level_size;
 
@@ -111,6 +114,10 @@ pub struct OfflineConfig {
     /// found from its first frames ([`registration`]). `None`: not checked, every recording is
     /// refined with [`Self::refinement_dvo`] and [`Self::hysteresis_frames`].
     pub unregistered_colour: Option<UnregisteredColourConfig>,
+    /// Each large enough object of the published mask completed to the depth-connected body it
+    /// belongs to, when that body is bounded by depth edges (docs/method.md, D26). `None`: the
+    /// masks of the passes as they are.
+    pub body_completion: Option<BodyCompletionConfig>,
 }
 
 /// What the closed loop's refinement pass uses instead on a recording whose colour is not
@@ -230,6 +237,7 @@ impl Default for OfflineConfig {
             refinement_min_side_px: DEFAULT_REFINEMENT_MIN_SIDE_PX,
             refinement_dvo: Self::paper_refinement_dvo(),
             unregistered_colour: Some(UnregisteredColourConfig::default()),
+            body_completion: Some(BodyCompletionConfig::default()),
         }
     }
 }
@@ -287,6 +295,9 @@ impl OfflineConfig {
                 });
             }
             unregistered.refinement_dvo.validate()?;
+        }
+        if let Some(body_completion) = &self.body_completion {
+            body_completion.validate()?;
         }
         self.refinement_dvo.validate()
     }
@@ -415,6 +426,8 @@ struct LaterPasses {
     has_previous_seed_mask: bool,
     /// The temporal hysteresis's held frames (None when it is off).
     hysteresis: Option<Hysteresis>,
+    /// Completes the emitted mask's objects to their bodies (None when it is off).
+    bodies: Option<BodyCompletion>,
 }
 
 impl OfflineProcessor {
@@ -530,6 +543,10 @@ impl OfflineProcessor {
                 previous_seed_mask: Mask::filled(size, 0),
                 has_previous_seed_mask: false,
                 hysteresis,
+                bodies: offline
+                    .body_completion
+                    .map(|c| BodyCompletion::new(size, c))
+                    .transpose()?,
             },
             registration,
             registration_decision: None,
@@ -806,7 +823,8 @@ impl LaterPasses {
         Ok(())
     }
 
-    /// Pass 3 for one frame, then `emit` with the refinement ∪ backward mask.
+    /// Pass 3 for one frame, then `emit` with the refinement ∪ backward mask, its objects
+    /// completed to their bodies.
     fn refine_and_emit(&mut self, frame: &Buffered, emit: &mut Sink<'_>) -> Result<()> {
         dequantize_gray_into(&frame.gray, &mut self.gray);
         let closed_loop = self.source == PoseSource::DvoClosedLoop;
@@ -823,7 +841,6 @@ impl LaterPasses {
             world_from_marker: replayed_pose.as_ref(),
             ignore_in_previous: ignore,
         })?;
-        let mut moving = 0usize;
         for ((m, &r), &b) in self
             .mask
             .as_mut_slice()
@@ -832,8 +849,11 @@ impl LaterPasses {
             .zip(frame.backward_mask.as_slice())
         {
             *m = r | b;
-            moving += usize::from(*m != 0);
         }
+        if let Some(bodies) = &mut self.bodies {
+            bodies.complete(&mut self.mask, &frame.depth_m)?;
+        }
+        let moving = self.mask.as_slice().iter().filter(|&&m| m != 0).count();
         let mut stats = out.stats;
         stats.detector.mask_pixels = moving;
         stats.moving_fraction = moving as f64 / self.size.area().max(1) as f64;

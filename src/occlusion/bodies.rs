@@ -1,0 +1,440 @@
+//! Completion of a detected part to the depth-connected body it belongs to (docs/method.md, D26).
+//!
+//! Occlusion accumulation marks the part of a moving object that covers something farther away:
+//! an object already in view when the recording starts, or one that slides along its own
+//! surface, is marked only along the edge that sweeps over background, while the rest of it
+//! looks like a static surface frame to frame (its depth does not change). Each connected
+//! component of the mask large enough to be trusted grows breadth-first over 4-neighbours whose
+//! depth is continuous with the pixel they grow from (|Z(n) − Z(f)| < `max_depth_step_fraction`
+//! · Z(f)). Continuity stops the growth at the object's depth edges. A body that is continuous
+//! with a surface extending far in depth (a person standing on the floor, a box sliding on a
+//! desk) would take that surface in; so a component whose growth reaches a continuous pixel
+//! farther than `max_depth_band_m` from its median depth keeps none of it. What is kept is a
+//! body bounded by depth edges on every side that is not the image border.
+//!
+//! Small components are left as they are: the false positives of a static scene are components
+//! near the minimum object size, and grown over the wall or cabinet they lie on they would
+//! cover it.
+
+use serde::{Deserialize, Serialize};
+
+use super::scaled_pixels;
+use crate::error::{Error, Result};
+use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET};
+
+/// Parameters of [`BodyCompletion`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BodyCompletionConfig {
+    /// Largest depth step between 4-neighbours, as a fraction of the depth grown from.
+    pub max_depth_step_fraction: f32,
+    /// A component whose growth reaches a continuous pixel this far (m) from its median depth
+    /// is left as it was.
+    pub max_depth_band_m: f32,
+    /// Components with fewer pixels than this (given at 640 × 480, scaled to the image's area)
+    /// are not grown.
+    pub min_seed_pixels_vga: usize,
+}
+
+/// Default [`BodyCompletionConfig::max_depth_step_fraction`]: the step DVO's ignore-mask
+/// completion uses (`dvo::completion`), about four times the depth sensor's step between
+/// neighbouring pixels on a slanted surface, well below the step from an object to the wall
+/// behind it.
+pub const DEFAULT_MAX_DEPTH_STEP_FRACTION: f32 = 0.03;
+/// Default [`BodyCompletionConfig::max_depth_band_m`]: the depth extent of a person seen from
+/// any side, as for DVO's ignore-mask completion.
+pub const DEFAULT_MAX_DEPTH_BAND_M: f32 = 0.5;
+/// Default [`BodyCompletionConfig::min_seed_pixels_vga`]: three times the minimum object size
+/// (`occlusion.min_object_pixels_vga`, 500). The components that grew over static surfaces on
+/// the 7-Scenes kitchen (offline, DVO poses) had at most 1.4 times the minimum object size
+/// (174 px at 320 × 240, where the minimum is 125); the board that fills the synthetic view
+/// from the first frame is marked with at least 1.4 times as many from its first frames on
+/// (docs/method.md, D26).
+pub const DEFAULT_MIN_SEED_PIXELS_VGA: usize = 1500;
+
+impl Default for BodyCompletionConfig {
+    fn default() -> Self {
+        Self {
+            max_depth_step_fraction: DEFAULT_MAX_DEPTH_STEP_FRACTION,
+            max_depth_band_m: DEFAULT_MAX_DEPTH_BAND_M,
+            min_seed_pixels_vga: DEFAULT_MIN_SEED_PIXELS_VGA,
+        }
+    }
+}
+
+impl BodyCompletionConfig {
+    /// Checks every field.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the bad field.
+    pub fn validate(&self) -> Result<()> {
+        for (name, value) in [
+            (
+                "offline.body_completion.max_depth_step_fraction",
+                self.max_depth_step_fraction,
+            ),
+            ("offline.body_completion.max_depth_band_m", self.max_depth_band_m),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(Error::InvalidParameter {
+                    name,
+                    value: value.to_string(),
+                    expected: "finite and > 0".into(),
+                });
+            }
+        }
+        if self.min_seed_pixels_vga == 0 {
+            return Err(Error::InvalidParameter {
+                name: "offline.body_completion.min_seed_pixels_vga",
+                value: "0".into(),
+                expected: ">= 1".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What one [`BodyCompletion::complete`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BodyCompletionStats {
+    /// Components grown and kept.
+    pub completed: usize,
+    /// Components whose growth reached beyond the depth band and was dropped.
+    pub dropped: usize,
+    /// Pixels added to the mask.
+    pub added_pixels: usize,
+}
+
+/// Not yet part of any component or kept growth.
+const FREE: u8 = 0;
+/// In a component of the mask, or added by a kept growth.
+const TAKEN: u8 = 1;
+
+/// Preallocated state of the completion for images of one size.
+#[derive(Debug, Clone)]
+pub struct BodyCompletion {
+    config: BodyCompletionConfig,
+    size: ImageSize,
+    min_seed_pixels: usize,
+    /// Per pixel: [`FREE`] or [`TAKEN`].
+    state: Vec<u8>,
+    /// The component being grown: its pixels, then the pixels its growth added.
+    queue: Vec<u32>,
+    /// Valid depths of the component being grown (for its median).
+    depths: Vec<f32>,
+}
+
+/// The 4-neighbours of pixel `i` inside a `w` × `h` image.
+fn neighbours_4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = (i % w, i / w);
+    [
+        (x > 0).then(|| i - 1),
+        (x + 1 < w).then_some(i + 1),
+        (y > 0).then(|| i - w),
+        (y + 1 < h).then_some(i + w),
+    ]
+    .into_iter()
+    .flatten()
+}
+
+/// Valid depth: positive and finite (0 and NaN mark missing measurements).
+fn has_depth(z: f32) -> bool {
+    z > 0.0 && z.is_finite()
+}
+
+impl BodyCompletion {
+    /// State for `size` images.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for a bad config.
+    pub fn new(size: ImageSize, config: BodyCompletionConfig) -> Result<Self> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            size,
+            min_seed_pixels: scaled_pixels(config.min_seed_pixels_vga, size),
+            state: vec![FREE; size.area()],
+            queue: Vec::with_capacity(size.area()),
+            depths: Vec::with_capacity(size.area()),
+        })
+    }
+
+    /// The smallest component grown, in pixels of this size.
+    pub fn min_seed_pixels(&self) -> usize {
+        self.min_seed_pixels
+    }
+
+    /// Completes every large enough component of `mask` (0 / nonzero) in place to the body
+    /// `depth_m` connects it to.
+    ///
+    /// # Errors
+    /// [`Error::SizeMismatch`] when an image is not the completion's size.
+    pub fn complete(&mut self, mask: &mut Mask, depth_m: &DepthMeters) -> Result<BodyCompletionStats> {
+        for (what, found) in [
+            ("body completion mask", mask.size()),
+            ("body completion depth", depth_m.size()),
+        ] {
+            if found != self.size {
+                return Err(Error::SizeMismatch {
+                    what: what.into(),
+                    expected: self.size,
+                    found,
+                });
+            }
+        }
+        let (w, h) = (self.size.width, self.size.height);
+        let depth = depth_m.as_slice();
+        let (step, band) = (self.config.max_depth_step_fraction, self.config.max_depth_band_m);
+        let mut stats = BodyCompletionStats::default();
+        self.state.fill(FREE);
+        let m = mask.as_mut_slice();
+        for start in 0..m.len() {
+            if m[start] == 0 || self.state[start] != FREE {
+                continue;
+            }
+            // The component (4-connected mask pixels) and its valid depths.
+            self.queue.clear();
+            self.depths.clear();
+            self.queue.push(start as u32);
+            self.state[start] = TAKEN;
+            let mut head = 0;
+            while head < self.queue.len() {
+                let i = self.queue[head] as usize;
+                head += 1;
+                if has_depth(depth[i]) {
+                    self.depths.push(depth[i]);
+                }
+                for j in neighbours_4(i, w, h) {
+                    if m[j] != 0 && self.state[j] == FREE {
+                        self.state[j] = TAKEN;
+                        self.queue.push(j as u32);
+                    }
+                }
+            }
+            let seeds = self.queue.len();
+            if seeds < self.min_seed_pixels || self.depths.is_empty() {
+                continue;
+            }
+            let mid = self.depths.len() / 2;
+            let median = *self.depths.select_nth_unstable_by(mid, f32::total_cmp).1;
+            // The growth, breadth-first from every pixel of the component with depth; it stops
+            // at the first continuous pixel outside the band.
+            let mut head = 0;
+            let mut leaked = false;
+            'grow: while head < self.queue.len() {
+                let i = self.queue[head] as usize;
+                head += 1;
+                let z = depth[i];
+                if !has_depth(z) {
+                    continue;
+                }
+                for j in neighbours_4(i, w, h) {
+                    let zj = depth[j];
+                    if m[j] != 0 || self.state[j] != FREE || !has_depth(zj) || (zj - z).abs() >= step * z {
+                        continue;
+                    }
+                    if (zj - median).abs() >= band {
+                        leaked = true;
+                        break 'grow;
+                    }
+                    self.state[j] = TAKEN;
+                    self.queue.push(j as u32);
+                }
+            }
+            let grown = &self.queue[seeds..];
+            if leaked {
+                for &i in grown {
+                    self.state[i as usize] = FREE;
+                }
+                stats.dropped += 1;
+            } else if !grown.is_empty() {
+                for &i in grown {
+                    m[i as usize] = MASK_SET;
+                }
+                stats.completed += 1;
+                stats.added_pixels += grown.len();
+            }
+        }
+        Ok(stats)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 64 × 48: a wall at 3 m; rows 30.. a floor rising from 2.9 m (row 30) to 2.0 m (row 47),
+    /// continuous with the wall; a board (x 10..30, y 5..25) floating at 1.5 m; a box (x 40..56,
+    /// y 20..41) standing on the floor, at the floor's depth where it stands.
+    fn scene() -> DepthMeters {
+        let size = ImageSize::new(64, 48);
+        let mut depth = DepthMeters::filled(size, 3.0);
+        for y in 30..48 {
+            let z = 2.9 - 0.9 * (y - 30) as f32 / 17.0;
+            for x in 0..64 {
+                depth.set(x, y, z);
+            }
+        }
+        for y in 5..25 {
+            for x in 10..30 {
+                depth.set(x, y, 1.5);
+            }
+        }
+        // The box's front is at the floor's depth where it stands (row 40): continuous with
+        // the floor's row 41 below it.
+        let floor_at_40 = 2.9 - 0.9 * 10.0 / 17.0;
+        for y in 20..41 {
+            for x in 40..56 {
+                depth.set(x, y, floor_at_40);
+            }
+        }
+        depth
+    }
+
+    fn completion(min_seed_pixels_vga: usize) -> BodyCompletion {
+        BodyCompletion::new(
+            ImageSize::new(64, 48),
+            BodyCompletionConfig {
+                min_seed_pixels_vga,
+                ..BodyCompletionConfig::default()
+            },
+        )
+        .unwrap()
+    }
+
+    fn mark(mask: &mut Mask, xs: std::ops::Range<usize>, ys: std::ops::Range<usize>) {
+        for y in ys {
+            for x in xs.clone() {
+                mask.set(x, y, MASK_SET);
+            }
+        }
+    }
+
+    fn count(mask: &Mask) -> usize {
+        mask.as_slice().iter().filter(|&&v| v != 0).count()
+    }
+
+    /// 640 × 480 pixels per pixel of the 64 × 48 test image.
+    const VGA_PER_PIXEL: usize = 100;
+
+    #[test]
+    fn a_strip_of_a_floating_board_grows_to_the_whole_board_and_no_further() {
+        let depth = scene();
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 26..30, 5..25);
+        let stats = completion(50 * VGA_PER_PIXEL)
+            .complete(&mut mask, &depth)
+            .unwrap();
+        assert_eq!(
+            stats,
+            BodyCompletionStats {
+                completed: 1,
+                dropped: 0,
+                added_pixels: 16 * 20
+            }
+        );
+        for y in 0..48 {
+            for x in 0..64 {
+                let board = (10..30).contains(&x) && (5..25).contains(&y);
+                assert_eq!(mask.get(x, y) != 0, board, "({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn a_box_continuous_with_the_floor_it_stands_on_keeps_its_mask() {
+        let depth = scene();
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 40..44, 20..41);
+        let before = mask.clone();
+        let stats = completion(50 * VGA_PER_PIXEL)
+            .complete(&mut mask, &depth)
+            .unwrap();
+        assert_eq!(
+            stats,
+            BodyCompletionStats {
+                completed: 0,
+                dropped: 1,
+                added_pixels: 0
+            }
+        );
+        assert_eq!(mask, before);
+    }
+
+    #[test]
+    fn components_below_the_seed_size_are_not_grown_and_each_component_is_judged_alone() {
+        let depth = scene();
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 26..30, 5..25); // 80 px on the board
+        mark(&mut mask, 40..44, 20..41); // 84 px on the box
+        let mut small = mask.clone();
+        completion(85 * VGA_PER_PIXEL)
+            .complete(&mut small, &depth)
+            .unwrap();
+        assert_eq!(small, mask, "both components are below 85 px");
+        let stats = completion(80 * VGA_PER_PIXEL)
+            .complete(&mut mask, &depth)
+            .unwrap();
+        assert_eq!((stats.completed, stats.dropped), (1, 1));
+        assert_eq!(count(&mask), 20 * 20 + 84);
+    }
+
+    #[test]
+    fn pixels_without_depth_are_never_added_and_growth_is_4_connected() {
+        let mut depth = scene();
+        // A column without depth splits the board: the part beyond it is not reached.
+        for y in 5..25 {
+            depth.set(20, y, 0.0);
+        }
+        depth.set(21, 10, f32::NAN);
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 26..30, 5..25);
+        completion(50 * VGA_PER_PIXEL)
+            .complete(&mut mask, &depth)
+            .unwrap();
+        assert_eq!(mask.get(20, 10), 0);
+        assert_eq!(mask.get(21, 10), 0);
+        assert_eq!(mask.get(22, 10), MASK_SET);
+        assert_eq!(mask.get(19, 10), 0, "the column without depth spans the board");
+        assert_eq!(count(&mask), 9 * 20 - 1);
+    }
+
+    #[test]
+    fn the_completion_is_idempotent_and_mismatched_sizes_are_errors() {
+        let depth = scene();
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 26..30, 5..25);
+        let mut c = completion(50 * VGA_PER_PIXEL);
+        c.complete(&mut mask, &depth).unwrap();
+        let once = mask.clone();
+        let stats = c.complete(&mut mask, &depth).unwrap();
+        assert_eq!(stats.added_pixels, 0);
+        assert_eq!(mask, once);
+        let mut wrong = Mask::filled(ImageSize::new(32, 24), 0);
+        assert!(matches!(
+            c.complete(&mut wrong, &depth),
+            Err(Error::SizeMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn invalid_parameters_are_named() {
+        for config in [
+            BodyCompletionConfig {
+                max_depth_step_fraction: 0.0,
+                ..Default::default()
+            },
+            BodyCompletionConfig {
+                max_depth_band_m: f32::NAN,
+                ..Default::default()
+            },
+            BodyCompletionConfig {
+                min_seed_pixels_vga: 0,
+                ..Default::default()
+            },
+        ] {
+            let err = BodyCompletion::new(ImageSize::new(8, 8), config).unwrap_err();
+            assert!(err.to_string().contains("offline.body_completion."), "{err}");
+        }
+    }
+}
