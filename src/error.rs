@@ -428,6 +428,19 @@ impl Mismatch {
 }
 
 impl Error {
+    /// `Ok` when `value` is finite and > 0, else [`Error::InvalidParameter`] naming `name`.
+    pub(crate) fn require_finite_positive(name: &'static str, value: f32) -> Result<()> {
+        if value.is_finite() && value > 0.0 {
+            Ok(())
+        } else {
+            Err(Error::InvalidParameter {
+                name,
+                value: value.to_string(),
+                expected: "finite and > 0".into(),
+            })
+        }
+    }
+
     /// Builds an [`Error::Decode`] for a message of `topic` (the caller may add which one).
     pub fn decode(topic: impl Into<String>, problem: DecodeProblem) -> Self {
         Error::Decode {

@@ -54,6 +54,19 @@ pub type Rgb8 = Image<[u8; 3]>;
 /// Value of a set pixel in a [`Mask`] (255, so a mask is a viewable `mono8` image).
 pub const MASK_SET: u8 = 255;
 
+/// The 4-neighbours of pixel `index` (row-major) inside a `width` × `height` grid.
+pub(crate) fn neighbours_4(index: usize, width: usize, height: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = (index % width, index / width);
+    [
+        (x > 0).then(|| index - 1),
+        (x + 1 < width).then_some(index + 1),
+        (y > 0).then(|| index - width),
+        (y + 1 < height).then_some(index + width),
+    ]
+    .into_iter()
+    .flatten()
+}
+
 /// The 8 neighbours of a pixel as (dx, dy), row by row.
 pub(crate) const NEIGHBOURS_8: [(isize, isize); 8] = [
     (-1, -1),

@@ -14,7 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET};
+use crate::image_buf::{neighbours_4, DepthMeters, ImageSize, Mask, MASK_SET};
 
 /// Parameters of [`IgnoreCompletion`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -50,22 +50,11 @@ impl IgnoreCompletionConfig {
     /// # Errors
     /// [`Error::InvalidParameter`] naming the bad field.
     pub fn validate(&self) -> Result<()> {
-        for (name, value) in [
-            (
-                "ignore_completion.max_depth_step_fraction",
-                self.max_depth_step_fraction,
-            ),
-            ("ignore_completion.max_depth_band_m", self.max_depth_band_m),
-        ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(Error::InvalidParameter {
-                    name,
-                    value: value.to_string(),
-                    expected: "finite and > 0".into(),
-                });
-            }
-        }
-        Ok(())
+        Error::require_finite_positive(
+            "ignore_completion.max_depth_step_fraction",
+            self.max_depth_step_fraction,
+        )?;
+        Error::require_finite_positive("ignore_completion.max_depth_band_m", self.max_depth_band_m)
     }
 }
 
@@ -96,19 +85,6 @@ pub struct IgnoreCompletion {
 }
 
 const UNLABELLED: u32 = u32::MAX;
-
-/// The 4-neighbours of cell `i` inside a `w` × `h` grid.
-fn neighbours_4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
-    let (x, y) = (i % w, i / w);
-    [
-        (x > 0).then(|| i - 1),
-        (x + 1 < w).then_some(i + 1),
-        (y > 0).then(|| i - w),
-        (y + 1 < h).then_some(i + w),
-    ]
-    .into_iter()
-    .flatten()
-}
 
 impl IgnoreCompletion {
     /// State for `size` images.

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use super::scaled_pixels;
 use crate::error::{Error, Result};
-use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET};
+use crate::image_buf::{neighbours_4, DepthMeters, ImageSize, Mask, MASK_SET};
 
 /// Parameters of [`BodyCompletion`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -68,21 +68,11 @@ impl BodyCompletionConfig {
     /// # Errors
     /// [`Error::InvalidParameter`] naming the bad field.
     pub fn validate(&self) -> Result<()> {
-        for (name, value) in [
-            (
-                "offline.body_completion.max_depth_step_fraction",
-                self.max_depth_step_fraction,
-            ),
-            ("offline.body_completion.max_depth_band_m", self.max_depth_band_m),
-        ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(Error::InvalidParameter {
-                    name,
-                    value: value.to_string(),
-                    expected: "finite and > 0".into(),
-                });
-            }
-        }
+        Error::require_finite_positive(
+            "offline.body_completion.max_depth_step_fraction",
+            self.max_depth_step_fraction,
+        )?;
+        Error::require_finite_positive("offline.body_completion.max_depth_band_m", self.max_depth_band_m)?;
         if self.min_seed_pixels_vga == 0 {
             return Err(Error::InvalidParameter {
                 name: "offline.body_completion.min_seed_pixels_vga",
@@ -122,19 +112,6 @@ pub struct BodyCompletion {
     queue: Vec<u32>,
     /// Valid depths of the component being grown (for its median).
     depths: Vec<f32>,
-}
-
-/// The 4-neighbours of pixel `i` inside a `w` × `h` image.
-fn neighbours_4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
-    let (x, y) = (i % w, i / w);
-    [
-        (x > 0).then(|| i - 1),
-        (x + 1 < w).then_some(i + 1),
-        (y > 0).then(|| i - w),
-        (y + 1 < h).then_some(i + w),
-    ]
-    .into_iter()
-    .flatten()
 }
 
 /// Valid depth: positive and finite (0 and NaN mark missing measurements).
@@ -326,12 +303,8 @@ mod tests {
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!(
-            stats,
-            BodyCompletionStats {
-                completed: 1,
-                dropped: 0,
-                added_pixels: 16 * 20
-            }
+            (stats.completed, stats.dropped, stats.added_pixels),
+            (1, 0, 16 * 20)
         );
         for y in 0..48 {
             for x in 0..64 {
@@ -350,14 +323,7 @@ mod tests {
         let stats = completion(50 * VGA_PER_PIXEL)
             .complete(&mut mask, &depth)
             .unwrap();
-        assert_eq!(
-            stats,
-            BodyCompletionStats {
-                completed: 0,
-                dropped: 1,
-                added_pixels: 0
-            }
-        );
+        assert_eq!((stats.completed, stats.dropped, stats.added_pixels), (0, 1, 0));
         assert_eq!(mask, before);
     }
 

@@ -194,17 +194,7 @@ impl OcclusionConfig {
     /// # Errors
     /// [`Error::InvalidParameter`] naming the first bad parameter.
     pub fn validate(&self) -> Result<()> {
-        let positive = |name: &'static str, value: f32| {
-            if value.is_finite() && value > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::InvalidParameter {
-                    name,
-                    value: value.to_string(),
-                    expected: "a finite number > 0".into(),
-                })
-            }
-        };
+        let positive = Error::require_finite_positive;
         positive("alpha", self.alpha)?;
         positive("beta", self.beta)?;
         positive("prediction_depth_gate_m", self.prediction_depth_gate_m)?;

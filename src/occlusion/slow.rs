@@ -91,14 +91,7 @@ impl SlowEvidenceConfig {
                 expected: "a fraction in [0, 1)".into(),
             });
         }
-        if !(self.alpha.is_finite() && self.alpha > 0.0) {
-            return Err(Error::InvalidParameter {
-                name: "slow_evidence.alpha",
-                value: self.alpha.to_string(),
-                expected: "a finite number > 0".into(),
-            });
-        }
-        Ok(())
+        Error::require_finite_positive("slow_evidence.alpha", self.alpha)
     }
 }
 
