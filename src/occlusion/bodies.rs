@@ -69,13 +69,13 @@ impl BodyCompletionConfig {
     /// [`Error::InvalidParameter`] naming the bad field.
     pub fn validate(&self) -> Result<()> {
         Error::require_finite_positive(
-            "offline.body_completion.max_depth_step_fraction",
+            "body_completion.max_depth_step_fraction",
             self.max_depth_step_fraction,
         )?;
-        Error::require_finite_positive("offline.body_completion.max_depth_band_m", self.max_depth_band_m)?;
+        Error::require_finite_positive("body_completion.max_depth_band_m", self.max_depth_band_m)?;
         if self.min_seed_pixels_vga == 0 {
             return Err(Error::InvalidParameter {
-                name: "offline.body_completion.min_seed_pixels_vga",
+                name: "body_completion.min_seed_pixels_vga",
                 value: "0".into(),
                 expected: ">= 1".into(),
             });
@@ -400,7 +400,7 @@ mod tests {
             },
         ] {
             let err = BodyCompletion::new(ImageSize::new(8, 8), config).unwrap_err();
-            assert!(err.to_string().contains("offline.body_completion."), "{err}");
+            assert!(err.to_string().contains("body_completion."), "{err}");
         }
     }
 }

@@ -9,6 +9,7 @@ use super::offline::OfflineConfig;
 use crate::dvo::completion::IgnoreCompletionConfig;
 use crate::dvo::DvoConfig;
 use crate::error::{Error, Result};
+use crate::occlusion::bodies::BodyCompletionConfig;
 use crate::occlusion::OcclusionConfig;
 
 /// Where the camera motion comes from.
@@ -183,6 +184,10 @@ pub struct ProcessorConfig {
     /// over the rest of each object's depth-continuous surface, see
     /// [`crate::dvo::completion`]); `None` = the detector's mask as it is (the paper).
     pub ignore_completion: Option<IgnoreCompletionConfig>,
+    /// Each large enough object of the published mask completed to the depth-connected body it
+    /// belongs to when depth edges bound that body ([`crate::occlusion::bodies`], docs/method.md
+    /// D26); `None` = the detector's mask as it is (the paper). DVO's ignore mask is unchanged.
+    pub body_completion: Option<BodyCompletionConfig>,
     /// Causal or offline processing (chooses between [`Processor`] and
     /// [`offline::OfflineProcessor`] where a caller offers both, as `occmask process` does).
     pub mode: ProcessingMode,
@@ -214,8 +219,8 @@ impl ProcessingMode {
 }
 
 impl Default for ProcessorConfig {
-    /// The closed loop with [`DvoConfig::closed_loop`], the default detector, failure policy and
-    /// ignore-mask completion.
+    /// The closed loop with [`DvoConfig::closed_loop`], the default detector, failure policy,
+    /// ignore-mask completion and body completion.
     fn default() -> Self {
         Self {
             pose_source: PoseSource::default(),
@@ -223,6 +228,7 @@ impl Default for ProcessorConfig {
             occlusion: OcclusionConfig::default(),
             failure: FailurePolicy::default(),
             ignore_completion: Some(IgnoreCompletionConfig::default()),
+            body_completion: Some(BodyCompletionConfig::default()),
             mode: ProcessingMode::default(),
             offline: OfflineConfig::default(),
         }
@@ -255,6 +261,9 @@ impl ProcessorConfig {
         self.dvo.validate()?;
         self.occlusion.validate()?;
         if let Some(completion) = &self.ignore_completion {
+            completion.validate()?;
+        }
+        if let Some(completion) = &self.body_completion {
             completion.validate()?;
         }
         self.offline.validate()?;

@@ -198,8 +198,9 @@ pub struct FrameOutput<'a> {
     pub timestamp_ns: u64,
     /// Moving-object mask (empty on frames without depth).
     pub mask: &'a Mask,
-    /// The part of `mask` a closed loop's odometry ignores: `mask` without the detector's
-    /// slow-change evidence ([`crate::occlusion::OcclusionDetector::odometry_mask`]).
+    /// What a closed loop's odometry ignores: the detector's mask without its slow-change
+    /// evidence ([`crate::occlusion::OcclusionDetector::odometry_mask`]) and without the body
+    /// completion ([`super::ProcessorConfig::body_completion`]).
     pub odometry_mask: &'a Mask,
     /// Motion from the previous frame's pose (identity for the first frame).
     pub current_from_previous: Isometry3<f64>,

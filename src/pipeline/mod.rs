@@ -95,6 +95,7 @@ use crate::error::{Error, Result};
 use crate::geometry::se3::{is_finite_pose, rotation_angle_rad};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
+use crate::occlusion::bodies::BodyCompletion;
 use crate::occlusion::OcclusionDetector;
 pub use config::{
     FailurePolicy, PoseSource, ProcessingMode, ProcessorConfig, DEFAULT_MAX_ANGULAR_SPEED_RADPS,
@@ -153,6 +154,8 @@ pub struct Processor {
     zero_accumulation_m: DepthMeters,
     /// DVO's ignore mask: the detector's mask (and the caller's) and their completion.
     ignore: IgnoreMask,
+    /// The published mask's completion to bodies and its output (None when it is off).
+    bodies: Option<(BodyCompletion, Mask)>,
 }
 
 /// The closed loop's ignore mask and its completion state.
@@ -288,6 +291,10 @@ impl Processor {
                 union: Mask::filled(size, 0),
                 completed: Mask::filled(size, 0),
             },
+            bodies: config
+                .body_completion
+                .map(|c| BodyCompletion::new(size, c).map(|b| (b, Mask::filled(size, 0))))
+                .transpose()?,
         })
     }
 
@@ -545,6 +552,8 @@ impl Processor {
         stats.pose_us = started.elapsed().as_micros() as u64;
 
         let detect_started = Instant::now();
+        // Pixels the body completion added to the published mask.
+        let mut completed_pixels = 0;
         let (mask, odometry_mask, accumulation_m) = if no_depth {
             self.detector_skipped = self.detector_skipped.saturating_add(1);
             (&self.empty_mask, &self.empty_mask, &self.zero_accumulation_m)
@@ -562,22 +571,34 @@ impl Processor {
             stats.detector_reset |= stats.detector.motion_rejected;
             self.world_from_detector_reference = world_from_camera;
             self.detector_skipped = 0;
+            let mask = match &mut self.bodies {
+                Some((bodies, completed)) => {
+                    completed.copy_from(self.detector.mask())?;
+                    completed_pixels = bodies.complete(completed, frame.depth_m)?.added_pixels;
+                    &*completed
+                }
+                None => self.detector.mask(),
+            };
             (
-                self.detector.mask(),
+                mask,
                 self.detector.odometry_mask(),
                 self.detector.accumulation_m(),
             )
         };
         stats.detector_us = detect_started.elapsed().as_micros() as u64;
-        stats.moving_fraction = stats.detector.mask_pixels as f64 / size.area().max(1) as f64;
         if let MotionSource::Dvo { tracker, .. } = &mut self.source {
+            // The keyframe follows the detector's own mask: the body completion changes what is
+            // published, never the odometry.
+            let detector_moving_fraction = stats.detector.mask_pixels as f64 / size.area().max(1) as f64;
             let detector_frames = self.detector.frames_processed();
             if tracker.config().keyframe.is_some_and(|k| {
-                stats.moving_fraction > k.max_moving_fraction || detector_frames < k.min_detector_frames
+                detector_moving_fraction > k.max_moving_fraction || detector_frames < k.min_detector_frames
             }) {
                 tracker.end_keyframe();
             }
         }
+        stats.detector.mask_pixels += completed_pixels;
+        stats.moving_fraction = stats.detector.mask_pixels as f64 / size.area().max(1) as f64;
         self.world_from_camera = world_from_camera;
         let current_from_previous = if self.frames == 0 {
             Isometry3::identity()

@@ -23,7 +23,7 @@
 //!    of each frame's predecessor as well as its own; otherwise with the first pass's (or the
 //!    external) poses. A frame's mask is the refinement pass's ∪ the backward pass's, each
 //!    large enough object in it completed to the depth-connected body it belongs to when that
-//!    body is bounded by depth edges ([`OfflineConfig::body_completion`], docs/method.md D26);
+//!    body is bounded by depth edges ([`ProcessorConfig::body_completion`], docs/method.md D26);
 //! 4. **temporal hysteresis** ([`OfflineConfig::hysteresis_frames`], "confirm later, mark
 //!    earlier"): refined frames are held back that many frames; where a frame's slow-change
 //!    evidence confirms an object, the pixels of the frames before it whose evidence was above
@@ -52,7 +52,7 @@ use crate::error::{Error, Result};
 use crate::geometry::se3::is_finite_pose;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
-use crate::occlusion::bodies::{BodyCompletion, BodyCompletionConfig};
+use crate::occlusion::bodies::BodyCompletion;
 use crate::occlusion::{OcclusionConfig, OcclusionDetector};
 use crate::pyramid::level_size;
 
@@ -114,10 +114,6 @@ pub struct OfflineConfig {
     /// found from its first frames ([`registration`]). `None`: not checked, every recording is
     /// refined with [`Self::refinement_dvo`] and [`Self::hysteresis_frames`].
     pub unregistered_colour: Option<UnregisteredColourConfig>,
-    /// Each large enough object of the published mask completed to the depth-connected body it
-    /// belongs to, when that body is bounded by depth edges (docs/method.md, D26). `None`: the
-    /// masks of the passes as they are.
-    pub body_completion: Option<BodyCompletionConfig>,
 }
 
 /// What the closed loop's refinement pass uses instead on a recording whose colour is not
@@ -237,7 +233,6 @@ impl Default for OfflineConfig {
             refinement_min_side_px: DEFAULT_REFINEMENT_MIN_SIDE_PX,
             refinement_dvo: Self::paper_refinement_dvo(),
             unregistered_colour: Some(UnregisteredColourConfig::default()),
-            body_completion: Some(BodyCompletionConfig::default()),
         }
     }
 }
@@ -295,9 +290,6 @@ impl OfflineConfig {
                 });
             }
             unregistered.refinement_dvo.validate()?;
-        }
-        if let Some(body_completion) = &self.body_completion {
-            body_completion.validate()?;
         }
         self.refinement_dvo.validate()
     }
@@ -439,6 +431,12 @@ impl OfflineProcessor {
     pub fn new(size: ImageSize, intrinsics: PinholeIntrinsics, config: ProcessorConfig) -> Result<Self> {
         config.validate()?;
         let offline = config.offline;
+        // The passes' own masks stay as their detectors leave them; the emitted mask is completed.
+        let body_completion = config.body_completion;
+        let config = ProcessorConfig {
+            body_completion: None,
+            ..config
+        };
         let mut reduced = None;
         let mut near_layer = None;
         let first = match config.pose_source {
@@ -543,8 +541,7 @@ impl OfflineProcessor {
                 previous_seed_mask: Mask::filled(size, 0),
                 has_previous_seed_mask: false,
                 hysteresis,
-                bodies: offline
-                    .body_completion
+                bodies: body_completion
                     .map(|c| BodyCompletion::new(size, c))
                     .transpose()?,
             },

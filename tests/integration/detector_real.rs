@@ -483,14 +483,14 @@ mod bonn_crowd {
         full.assert_offline_bounds("--full-resolution", FULL_RESOLUTION_F1_BOUND);
     }
 
-    // Measured (docs/accuracy.md): offline ATE 0.038 m, rotation RPE 1.10°, F1 0.929 (far-layer
-    // preset 0.047 m, 1.25°, 0.921; full resolution 0.046 m, 1.21°, 0.938); causal ATE 0.095 m,
-    // F1 0.863. Bounds 26–70 % above (ATE, RPE) or 0.04–0.05 below (F1): DVO's result moved by
+    // Measured (docs/accuracy.md): offline ATE 0.038 m, rotation RPE 1.10°, F1 0.932 (far-layer
+    // preset 0.047 m, 1.25°, 0.934; full resolution 0.046 m, 1.21°, 0.942); causal ATE 0.095 m,
+    // F1 0.892. Bounds 26–70 % above (ATE, RPE) or 0.04–0.05 below (F1): DVO's result moved by
     // several millimetres with small changes elsewhere in the pipeline.
     const OFFLINE_ATE_BOUND_M: f64 = 0.065;
     const OFFLINE_ROTATION_RPE_BOUND_DEG: f64 = 1.8;
     const OFFLINE_F1_BOUND: f64 = 0.88;
     const FULL_RESOLUTION_F1_BOUND: f64 = 0.90;
     const CAUSAL_ATE_BOUND_M: f64 = 0.12;
-    const CAUSAL_F1_BOUND: f64 = 0.82;
+    const CAUSAL_F1_BOUND: f64 = 0.85;
 }
