@@ -170,11 +170,13 @@ min_px = config["occlusion"]["min_object_pixels_vga"] * size[0] * size[1] / (640
 at_target = frames[start + 5]["truth_pixels"]
 big_enough = next(i for i, f in enumerate(frames) if f["truth_pixels"] >= min_px)
 found = next(i for i, f in enumerate(frames) if f["truth_pixels"] and f["recall"] >= 0.5)
-print("sliding_on_desk enters at the image corner: its first pixel is in view at frame %d, five" % start)
-print("frames later it shows %d px, fewer than the %d-px minimum object size at %d×%d, and it lies" % (at_target, min_px, *size))
-print("close in front of the desk, so it occludes little. It reaches that size at frame %d and a" % big_enough)
+without_depth = frames[start + 5]["truth_pixels_without_depth"]
+print("sliding_on_desk enters at the image corner: its first pixel is in view at frame %d. Five" % start)
+print("frames later it shows %d px, %d of them without depth (the sensor's invalid border ring)," % (at_target, without_depth))
+print("fewer than the %d-px minimum object size at %d×%d; it lies close in front of the desk, so" % (min_px, *size))
+print("its measured pixels occlude little. It reaches that size at frame %d and a recall of 0.5" % big_enough)
 later = found - big_enough
-print("recall of 0.5 at frame %d (%d frame%s later)." % (found, later, "" if later == 1 else "s"))
+print("at frame %d (%d frame%s later)." % (found, later, "" if later == 1 else "s"))
 print()
 print("Held out: the same classes with other seeds, room textures, sizes, speeds, depths and camera")
 print("paths (`Scenario::HELD_OUT`). No default was tuned on these; they are reported apart, same")

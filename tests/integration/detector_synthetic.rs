@@ -312,7 +312,9 @@ fn failure_class_head_on_approach() {
 /// before occlusion events entered the evidence, D22; with the offline passes' DVO at 80×60
 /// and 160×120: 0.859, 12; without the temporal hysteresis 0.822, 13; true pose 0.831, 11);
 /// bounds F1 0.83, onset 9.
-/// Onset: the box enters at the image corner (1 px at frame 2); its visible part reaches the
+/// Onset: the box enters at the image corner (1 px at frame 2) through the sensor's invalid
+/// border ring: at frame 7 (onset 5) 84 of its 105 px have no depth, and on its 21 measured
+/// pixels the depth fell by at most 0.23 m since frame 6 (true poses; τ_α there is 0.24 m). Its visible part reaches the
 /// object threshold (125 px at 320×240) at frame 8 and is half found at frame 9.
 #[test]
 fn failure_class_sliding_on_desk() {
@@ -333,7 +335,7 @@ fn failure_class_sliding_on_desk_target() {
 /// D19), but the passes mark only the strip along the board's leading edge, and the board's
 /// interior, sliding along its own plane, looks static frame to frame. The strip, completed to
 /// the depth-connected body it belongs to (docs/method.md D26), is the whole board: measured F1
-/// 0.990, onset 0, ATE 0.056 m (without the completion, `offline.body_completion` null: 0.581,
+/// 0.990, onset 0, ATE 0.056 m (without the completion, `body_completion` null: 0.581,
 /// onset 77; with the offline passes' DVO at 80×60 and 160×120 the odometry followed the board:
 /// F1 0.035, ATE 0.286 m). Bounds: the targets, ATE 0.08 m.
 #[test]
