@@ -230,6 +230,11 @@ pub enum Scenario {
     /// Held out: a panning, tilted camera in a room with a static shelf and a static cabinet
     /// ([`FailureClass::StaticControl`]).
     HeldOutStatic,
+    /// Held out: a 1.1 m × 1.7 m block standing on the floor 1.5 m away covers more than half of
+    /// the first frame and slides sideways (0.4 m/s); the camera looks down 20°, so the floor it
+    /// stands on is in view below it, as under a person walking past
+    /// ([`FailureClass::DominantFromStart`]).
+    HeldOutDominantOnFloor,
 }
 
 /// The failure classes the later scenarios exercise (objects the occlusion detector finds
@@ -291,18 +296,19 @@ impl Scenario {
 
     /// Held-out scenarios: the same failure classes with other seeds, sizes, speeds, depths and
     /// camera paths. No default is tuned on them; report them apart.
-    pub const HELD_OUT: [Scenario; 6] = [
+    pub const HELD_OUT: [Scenario; 7] = [
         Scenario::HeldOutInViewAtStart,
         Scenario::HeldOutRestsThenMoves,
         Scenario::HeldOutHeadOnApproach,
         Scenario::HeldOutSlidingOnFloor,
         Scenario::HeldOutDominantFromStart,
         Scenario::HeldOutStatic,
+        Scenario::HeldOutDominantOnFloor,
     ];
 
     /// Every scenario: [`Scenario::ALL`], then [`Scenario::FAILURE_CLASSES`], then
     /// [`Scenario::HELD_OUT`].
-    pub const EVERY: [Scenario; 20] = [
+    pub const EVERY: [Scenario; 21] = [
         Scenario::SmallObjectCrossing,
         Scenario::DominantObject,
         Scenario::EnteringWhilePanning,
@@ -323,6 +329,7 @@ impl Scenario {
         Scenario::HeldOutSlidingOnFloor,
         Scenario::HeldOutDominantFromStart,
         Scenario::HeldOutStatic,
+        Scenario::HeldOutDominantOnFloor,
     ];
 
     /// The scenario called `name` ([`Self::name`]).
@@ -353,9 +360,9 @@ impl Scenario {
             | Scenario::HeldOutRestsThenMoves => Some(FailureClass::LateOnset),
             Scenario::HeadOnApproach | Scenario::HeldOutHeadOnApproach => Some(FailureClass::HeadOnApproach),
             Scenario::SlidingOnDesk | Scenario::HeldOutSlidingOnFloor => Some(FailureClass::NearBackground),
-            Scenario::DominantFromStart | Scenario::HeldOutDominantFromStart => {
-                Some(FailureClass::DominantFromStart)
-            }
+            Scenario::DominantFromStart
+            | Scenario::HeldOutDominantFromStart
+            | Scenario::HeldOutDominantOnFloor => Some(FailureClass::DominantFromStart),
             Scenario::StaticDesk | Scenario::HeldOutStatic => Some(FailureClass::StaticControl),
         }
     }
@@ -391,6 +398,7 @@ impl Scenario {
             Scenario::HeldOutSlidingOnFloor => "held_out_sliding_on_floor",
             Scenario::HeldOutDominantFromStart => "held_out_dominant_from_start",
             Scenario::HeldOutStatic => "held_out_static",
+            Scenario::HeldOutDominantOnFloor => "held_out_dominant_on_floor",
         }
     }
 }

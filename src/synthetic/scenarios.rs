@@ -374,6 +374,28 @@ impl SyntheticSequence {
                 };
                 (camera, vec![shelf, cabinet], 90)
             }
+            Scenario::HeldOutDominantOnFloor => {
+                // Standing on the floor (y = 1.4): centre 0.85 m above it.
+                let b = box_moving_since(
+                    Vector3::new(-0.1, 0.55, 1.55),
+                    Vector3::new(0.55, 0.85, 0.2),
+                    MOVING_SINCE_S,
+                    Vector3::new(0.4, 0.0, 0.0),
+                    -0.03,
+                    seed ^ 0x98,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::new(0.0, 0.05, 0.0),
+                    velocity_mps: Vector3::new(0.02, 0.0, -0.03),
+                    sway_amplitude_m: Vector3::new(0.04, 0.03, 0.03),
+                    sway_period_s: 2.3,
+                    yaw_rate_radps: 0.0,
+                    yaw_amplitude_rad: 0.04,
+                    pitch_amplitude_rad: 0.02,
+                    pitch_offset_rad: -0.35,
+                };
+                (camera, vec![b], 90)
+            }
         };
         Self {
             scenario: Some(scenario),

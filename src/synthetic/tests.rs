@@ -285,7 +285,9 @@ fn failure_class_scenarios_show_their_class() {
             | Scenario::HeldOutHeadOnApproach => {
                 assert!(first > 0.01, "{name}: moving in view at frame 0 ({first})")
             }
-            Scenario::DominantFromStart | Scenario::HeldOutDominantFromStart => {
+            Scenario::DominantFromStart
+            | Scenario::HeldOutDominantFromStart
+            | Scenario::HeldOutDominantOnFloor => {
                 assert!(first > 0.5, "{name}: {first} of frame 0")
             }
             Scenario::RestsThenMovesSlowly | Scenario::HeldOutRestsThenMoves | Scenario::HeadOnApproach => {

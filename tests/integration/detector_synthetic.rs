@@ -402,8 +402,13 @@ fn failure_class_static_desk() {
 /// moves 0.986 / 0, head-on 0.962 / 2, sliding on the floor 0.821 / 4, dominant from start
 /// 0.975 / 0 (ATE 0.038 m; 0.235 / never before the body completion of docs/method.md D26,
 /// whose gates were chosen with this board in view, so it is no longer held out for D26);
-/// static 0 % false positives. Bounds: the targets where they are met (dominant: ATE 0.10 m);
-/// floor sliding 0.04 below the F1 and 4 frames above the onset.
+/// static 0 % false positives; a block standing on the floor, the floor in view, that fills
+/// more than half the view from the first frame (added after D26, run once as defined): F1
+/// 0.734 (P 1.000, R 0.613), onset 2, ATE 0.034 m. The odometry holds; where the floor the block
+/// stands on is in view, its growth meets the floor and the completion leaves the block as the
+/// passes marked it, the leading half (without the completion: F1 0.596, onset 63). Bounds:
+/// the targets where they are met (dominant: ATE 0.10 m); floor sliding and the block on the
+/// floor 0.04 below the F1, floor sliding 4 frames above the onset.
 #[test]
 fn held_out_scenarios() {
     for scenario in Scenario::HELD_OUT {
@@ -418,6 +423,10 @@ fn held_out_scenarios() {
             Scenario::HeldOutSlidingOnFloor => assert_class(&score, name, 0.77, 8),
             Scenario::HeldOutDominantFromStart => {
                 assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
+                assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
+            }
+            Scenario::HeldOutDominantOnFloor => {
+                assert_class(&score, name, 0.69, ONSET_TARGET_FRAMES);
                 assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
             }
             Scenario::HeldOutStatic => {
