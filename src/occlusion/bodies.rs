@@ -34,6 +34,12 @@ pub struct BodyCompletionConfig {
     /// Components with fewer pixels than this (given at 640 × 480, scaled to the image's area)
     /// are not grown.
     pub min_seed_pixels_vga: usize,
+    /// A growth that reaches beyond the depth band is kept without its support surface when it
+    /// has one: the largest plane among the grown pixels (within the band) on which at most
+    /// [`SUPPORT_MAX_SEED_FRACTION`] of the component lies, within this tolerance in inverse
+    /// depth (1/m; a plane is linear in inverse depth across the image). What stays connected
+    /// to the component without that plane joins the mask. `None`: the growth is dropped.
+    pub support_plane_tolerance_inv_m: Option<f32>,
 }
 
 /// Default [`BodyCompletionConfig::max_depth_step_fraction`]: the step DVO's ignore-mask
@@ -52,12 +58,31 @@ pub const DEFAULT_MAX_DEPTH_BAND_M: f32 = 0.5;
 /// (docs/method.md, D26).
 pub const DEFAULT_MIN_SEED_PIXELS_VGA: usize = 1500;
 
+/// Default [`BodyCompletionConfig::support_plane_tolerance_inv_m`]: three times the Kinect's
+/// disparity step in inverse depth (1/8 px over 525 px · 7.5 cm: 0.0032 /m), 2.3 cm of depth
+/// at 1.5 m. Measured (docs/method.md D27): on people walking past the camera (Bonn "crowd",
+/// offline) mask F1 0.932 → 0.948 with 0.01 /m, 0.941 with 0.005, 0.953 with 0.02; on the box
+/// sliding on a desk 0.892 → 0.900 (0.907 with 0.005, 0.893 with 0.02).
+pub const DEFAULT_SUPPORT_PLANE_TOLERANCE_INV_M: f32 = 0.01;
+/// A plane on which more than this fraction of the component lies is the body's own surface
+/// (a board's face), not the surface it stands on.
+pub const SUPPORT_MAX_SEED_FRACTION: f32 = 0.3;
+/// A support plane must hold at least this fraction of the grown pixels.
+pub const SUPPORT_MIN_GROWN_FRACTION: f32 = 0.2;
+/// Planes taken out of a leaking growth at most (a floor, the wall behind, a desk's front).
+pub const SUPPORT_MAX_PLANES: usize = 3;
+/// Plane hypotheses tried per plane taken out.
+const SUPPORT_HYPOTHESES: usize = 64;
+/// Pixels of the growth (and of the component) the hypotheses are scored on, at most.
+const SUPPORT_SAMPLE: usize = 1024;
+
 impl Default for BodyCompletionConfig {
     fn default() -> Self {
         Self {
             max_depth_step_fraction: DEFAULT_MAX_DEPTH_STEP_FRACTION,
             max_depth_band_m: DEFAULT_MAX_DEPTH_BAND_M,
             min_seed_pixels_vga: DEFAULT_MIN_SEED_PIXELS_VGA,
+            support_plane_tolerance_inv_m: Some(DEFAULT_SUPPORT_PLANE_TOLERANCE_INV_M),
         }
     }
 }
@@ -73,6 +98,9 @@ impl BodyCompletionConfig {
             self.max_depth_step_fraction,
         )?;
         Error::require_finite_positive("body_completion.max_depth_band_m", self.max_depth_band_m)?;
+        if let Some(tolerance) = self.support_plane_tolerance_inv_m {
+            Error::require_finite_positive("body_completion.support_plane_tolerance_inv_m", tolerance)?;
+        }
         if self.min_seed_pixels_vga == 0 {
             return Err(Error::InvalidParameter {
                 name: "body_completion.min_seed_pixels_vga",
@@ -91,6 +119,9 @@ pub struct BodyCompletionStats {
     pub completed: usize,
     /// Components whose growth reached beyond the depth band and was dropped.
     pub dropped: usize,
+    /// Components whose growth reached beyond the depth band and kept what lies off its
+    /// support plane (counted in `completed` too when that added pixels).
+    pub supported: usize,
     /// Pixels added to the mask.
     pub added_pixels: usize,
 }
@@ -99,6 +130,8 @@ pub struct BodyCompletionStats {
 const FREE: u8 = 0;
 /// In a component of the mask, or added by a kept growth.
 const TAKEN: u8 = 1;
+/// Grown within the band and on no support plane taken out yet.
+const OFF_PLANE: u8 = 2;
 
 /// Preallocated state of the completion for images of one size.
 #[derive(Debug, Clone)]
@@ -112,6 +145,8 @@ pub struct BodyCompletion {
     queue: Vec<u32>,
     /// Valid depths of the component being grown (for its median).
     depths: Vec<f32>,
+    /// A leaking growth while its support planes are taken out.
+    leaked_growth: Vec<u32>,
 }
 
 /// Valid depth: positive and finite (0 and NaN mark missing measurements).
@@ -133,6 +168,7 @@ impl BodyCompletion {
             state: vec![FREE; size.area()],
             queue: Vec::with_capacity(size.area()),
             depths: Vec::with_capacity(size.area()),
+            leaked_growth: Vec::new(),
         })
     }
 
@@ -161,7 +197,6 @@ impl BodyCompletion {
         }
         let (w, h) = (self.size.width, self.size.height);
         let depth = depth_m.as_slice();
-        let (step, band) = (self.config.max_depth_step_fraction, self.config.max_depth_band_m);
         let mut stats = BodyCompletionStats::default();
         self.state.fill(FREE);
         let m = mask.as_mut_slice();
@@ -194,37 +229,28 @@ impl BodyCompletion {
             }
             let mid = self.depths.len() / 2;
             let median = *self.depths.select_nth_unstable_by(mid, f32::total_cmp).1;
-            // The growth, breadth-first from every pixel of the component with depth; it stops
-            // at the first continuous pixel outside the band.
-            let mut head = 0;
-            let mut leaked = false;
-            'grow: while head < self.queue.len() {
-                let i = self.queue[head] as usize;
-                head += 1;
-                let z = depth[i];
-                if !has_depth(z) {
-                    continue;
-                }
-                for j in neighbours_4(i, w, h) {
-                    let zj = depth[j];
-                    if m[j] != 0 || self.state[j] != FREE || !has_depth(zj) || (zj - z).abs() >= step * z {
-                        continue;
-                    }
-                    if (zj - median).abs() >= band {
-                        leaked = true;
-                        break 'grow;
-                    }
-                    self.state[j] = TAKEN;
-                    self.queue.push(j as u32);
-                }
-            }
+            // The growth, breadth-first from every pixel of the component with depth; without
+            // a support plane to take out it stops at the first continuous pixel outside the band.
+            let with_support = self.config.support_plane_tolerance_inv_m.is_some();
+            let leaked = self.grow(m, depth, median, FREE, !with_support);
+            // A leaking growth is kept only without its support plane (and only when it has one).
+            let keep = !leaked
+                || self
+                    .config
+                    .support_plane_tolerance_inv_m
+                    .is_some_and(|tolerance| {
+                        self.keep_off_support_plane(seeds, depth, median, tolerance, start)
+                    });
             let grown = &self.queue[seeds..];
-            if leaked {
+            if !keep {
                 for &i in grown {
                     self.state[i as usize] = FREE;
                 }
                 stats.dropped += 1;
-            } else if !grown.is_empty() {
+                continue;
+            }
+            stats.supported += usize::from(leaked);
+            if !grown.is_empty() {
                 for &i in grown {
                     m[i as usize] = MASK_SET;
                 }
@@ -236,9 +262,186 @@ impl BodyCompletion {
     }
 }
 
+impl BodyCompletion {
+    /// Grows `self.queue` breadth-first from its first pixel over 4-neighbours outside `mask`
+    /// (empty: no mask) whose depth is continuous with the pixel they grow from: those in state
+    /// `candidate` within the band around `median` join it (TAKEN); reaching one, free or
+    /// candidate, beyond the band is a leak. Returns whether it leaked; stops at the first leak
+    /// when `stop_at_leak`.
+    fn grow(&mut self, mask: &[u8], depth: &[f32], median: f32, candidate: u8, stop_at_leak: bool) -> bool {
+        let (w, h) = (self.size.width, self.size.height);
+        let (step, band) = (self.config.max_depth_step_fraction, self.config.max_depth_band_m);
+        let mut leaked = false;
+        let mut head = 0;
+        while head < self.queue.len() {
+            let i = self.queue[head] as usize;
+            head += 1;
+            let z = depth[i];
+            if !has_depth(z) {
+                continue;
+            }
+            for j in neighbours_4(i, w, h) {
+                let (zj, state) = (depth[j], self.state[j]);
+                if mask.get(j).is_some_and(|&v| v != 0)
+                    || (state != candidate && state != FREE)
+                    || !has_depth(zj)
+                    || (zj - z).abs() >= step * z
+                {
+                    continue;
+                }
+                if (zj - median).abs() >= band {
+                    leaked = true;
+                    if stop_at_leak {
+                        return true;
+                    }
+                } else if state == candidate {
+                    self.state[j] = TAKEN;
+                    self.queue.push(j as u32);
+                }
+            }
+        }
+        leaked
+    }
+
+    /// For a growth that leaked (`self.queue[seeds..]`, the pixels within the band): takes out
+    /// its support surface. Up to [`SUPPORT_MAX_PLANES`] times, the plane in (column, row, 1/Z)
+    /// that holds the most of the remaining growth is taken out of it, unless the component
+    /// lies on it (more than [`SUPPORT_MAX_SEED_FRACTION`] of it: the component is part of that
+    /// surface) or it holds less than [`SUPPORT_MIN_GROWN_FRACTION`] of the growth; then the
+    /// growth is grown again from the component without the planes taken out. Once that growth
+    /// no longer reaches beyond the band, `self.queue` is cut to the component and it, and true
+    /// is returned. Otherwise the whole growth is freed, `self.queue` cut to the component, and
+    /// false returned.
+    fn keep_off_support_plane(
+        &mut self,
+        seeds: usize,
+        depth: &[f32],
+        median: f32,
+        tolerance: f32,
+        rng_seed: usize,
+    ) -> bool {
+        let w = self.size.width;
+        self.leaked_growth.clear();
+        self.leaked_growth.extend_from_slice(&self.queue[seeds..]);
+        self.queue.truncate(seeds);
+        for &i in &self.leaked_growth {
+            self.state[i as usize] = OFF_PLANE;
+        }
+        let point = |i: u32| {
+            let i = i as usize;
+            [(i % w) as f32, (i / w) as f32, 1.0 / depth[i]]
+        };
+        let on = |plane: &[f32; 3], p: &[f32; 3]| {
+            (plane[0] * p[0] + plane[1] * p[1] + plane[2] - p[2]).abs() < tolerance
+        };
+        let stride = |n: usize| n.div_ceil(SUPPORT_SAMPLE).max(1);
+        let seed_sample: Vec<[f32; 3]> = self.queue[..seeds]
+            .iter()
+            .step_by(stride(seeds))
+            .filter(|&&i| has_depth(depth[i as usize]))
+            .map(|&i| point(i))
+            .collect();
+        // Hypotheses from triples of grown pixels, drawn by a fixed generator per component.
+        let mut rng = (rng_seed as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+        let mut next = |n: usize| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng % n as u64) as usize
+        };
+        let mut kept = false;
+        for _ in 0..SUPPORT_MAX_PLANES {
+            let remaining = self
+                .leaked_growth
+                .iter()
+                .filter(|&&i| self.state[i as usize] == OFF_PLANE)
+                .count();
+            let grown_sample: Vec<[f32; 3]> = self
+                .leaked_growth
+                .iter()
+                .filter(|&&i| self.state[i as usize] == OFF_PLANE)
+                .step_by(stride(remaining))
+                .map(|&i| point(i))
+                .collect();
+            if grown_sample.len() < 3 {
+                break;
+            }
+            let mut best: Option<([f32; 3], usize)> = None;
+            for _ in 0..SUPPORT_HYPOTHESES {
+                let n = grown_sample.len();
+                let (p, q, r) = (
+                    grown_sample[next(n)],
+                    grown_sample[next(n)],
+                    grown_sample[next(n)],
+                );
+                let Some(plane) = plane_through(&p, &q, &r) else {
+                    continue;
+                };
+                let count = grown_sample.iter().filter(|p| on(&plane, p)).count();
+                if best.is_none_or(|(_, c)| count > c) {
+                    best = Some((plane, count));
+                }
+            }
+            let Some((plane, count)) = best else {
+                break;
+            };
+            let on_seed = seed_sample.iter().filter(|p| on(&plane, p)).count();
+            if (count as f32) < SUPPORT_MIN_GROWN_FRACTION * grown_sample.len() as f32
+                || on_seed as f32 > SUPPORT_MAX_SEED_FRACTION * seed_sample.len() as f32
+            {
+                break;
+            }
+            for &i in &self.leaked_growth {
+                if self.state[i as usize] == OFF_PLANE && on(&plane, &point(i)) {
+                    self.state[i as usize] = FREE;
+                }
+            }
+            // Grow again from the component over what is left; stop where it leaks.
+            let leaks = self.grow(&[], depth, median, OFF_PLANE, true);
+            if !leaks {
+                kept = true;
+                break;
+            }
+            for &i in &self.queue[seeds..] {
+                self.state[i as usize] = OFF_PLANE;
+            }
+            self.queue.truncate(seeds);
+        }
+        for &i in &self.leaked_growth {
+            if self.state[i as usize] == OFF_PLANE || (!kept && self.state[i as usize] == TAKEN) {
+                self.state[i as usize] = FREE;
+            }
+        }
+        if !kept {
+            self.queue.truncate(seeds);
+        }
+        kept
+    }
+}
+
+/// The plane `1/Z = a·u + b·v + c` through three points `[u, v, 1/Z]` (`None` when they are
+/// collinear in the image).
+fn plane_through(p: &[f32; 3], q: &[f32; 3], r: &[f32; 3]) -> Option<[f32; 3]> {
+    let (du1, dv1, ds1) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+    let (du2, dv2, ds2) = (r[0] - p[0], r[1] - p[1], r[2] - p[2]);
+    let det = du1 * dv2 - du2 * dv1;
+    if det.abs() < 1.0 {
+        return None;
+    }
+    let a = (ds1 * dv2 - ds2 * dv1) / det;
+    let b = (du1 * ds2 - du2 * ds1) / det;
+    Some([a, b, p[2] - a * p[0] - b * p[1]])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Depth of the floor in row `y` (30..48) of [`scene`]: a plane, so its inverse depth is
+    /// linear in the row, from 2.9 m (row 30) to 2.0 m (row 47).
+    fn floor_m(y: usize) -> f32 {
+        1.0 / (1.0 / 2.9 + (1.0 / 2.0 - 1.0 / 2.9) * (y - 30) as f32 / 17.0)
+    }
 
     /// 64 × 48: a wall at 3 m; rows 30.. a floor rising from 2.9 m (row 30) to 2.0 m (row 47),
     /// continuous with the wall; a board (x 10..30, y 5..25) floating at 1.5 m; a box (x 40..56,
@@ -247,9 +450,8 @@ mod tests {
         let size = ImageSize::new(64, 48);
         let mut depth = DepthMeters::filled(size, 3.0);
         for y in 30..48 {
-            let z = 2.9 - 0.9 * (y - 30) as f32 / 17.0;
             for x in 0..64 {
-                depth.set(x, y, z);
+                depth.set(x, y, floor_m(y));
             }
         }
         for y in 5..25 {
@@ -259,10 +461,9 @@ mod tests {
         }
         // The box's front is at the floor's depth where it stands (row 40): continuous with
         // the floor's row 41 below it.
-        let floor_at_40 = 2.9 - 0.9 * 10.0 / 17.0;
         for y in 20..41 {
             for x in 40..56 {
-                depth.set(x, y, floor_at_40);
+                depth.set(x, y, floor_m(40));
             }
         }
         depth
@@ -273,6 +474,19 @@ mod tests {
             ImageSize::new(64, 48),
             BodyCompletionConfig {
                 min_seed_pixels_vga,
+                ..BodyCompletionConfig::default()
+            },
+        )
+        .unwrap()
+    }
+
+    /// [`completion`] that drops every growth reaching beyond the band (D26 alone).
+    fn completion_without_support(min_seed_pixels_vga: usize) -> BodyCompletion {
+        BodyCompletion::new(
+            ImageSize::new(64, 48),
+            BodyCompletionConfig {
+                min_seed_pixels_vga,
+                support_plane_tolerance_inv_m: None,
                 ..BodyCompletionConfig::default()
             },
         )
@@ -315,15 +529,51 @@ mod tests {
     }
 
     #[test]
-    fn a_box_continuous_with_the_floor_it_stands_on_keeps_its_mask() {
+    fn without_the_support_plane_a_box_continuous_with_the_floor_keeps_its_mask() {
         let depth = scene();
         let mut mask = Mask::filled(depth.size(), 0);
         mark(&mut mask, 40..44, 20..41);
         let before = mask.clone();
-        let stats = completion(50 * VGA_PER_PIXEL)
+        let stats = completion_without_support(50 * VGA_PER_PIXEL)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!((stats.completed, stats.dropped, stats.added_pixels), (0, 1, 0));
+        assert_eq!(mask, before);
+    }
+
+    #[test]
+    fn a_box_standing_on_the_floor_grows_to_the_box_without_the_floor() {
+        let depth = scene();
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 40..44, 20..41);
+        let stats = completion(50 * VGA_PER_PIXEL)
+            .complete(&mut mask, &depth)
+            .unwrap();
+        assert_eq!((stats.completed, stats.dropped, stats.supported), (1, 0, 1));
+        // The whole box but its rows that lie within the tolerance of the floor's plane: its
+        // front is at the floor's depth in row 40, one row of floor further in row 39.
+        let tolerance = DEFAULT_SUPPORT_PLANE_TOLERANCE_INV_M;
+        let on_floor = |y: usize| y >= 30 && (1.0 / floor_m(40) - 1.0 / floor_m(y)).abs() < tolerance;
+        assert_eq!((30..41).filter(|&y| on_floor(y)).collect::<Vec<_>>(), [39, 40]);
+        for y in 0..48 {
+            for x in 0..64 {
+                let marked = (40..44).contains(&x) && (20..41).contains(&y);
+                let box_off_floor = (40..56).contains(&x) && (20..41).contains(&y) && !on_floor(y);
+                assert_eq!(mask.get(x, y) != 0, marked || box_off_floor, "({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn a_component_lying_on_the_extended_surface_is_not_grown() {
+        let depth = scene();
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 2..14, 34..44); // 120 px of floor
+        let before = mask.clone();
+        let stats = completion(50 * VGA_PER_PIXEL)
+            .complete(&mut mask, &depth)
+            .unwrap();
+        assert_eq!((stats.completed, stats.dropped, stats.supported), (0, 1, 0));
         assert_eq!(mask, before);
     }
 
@@ -338,7 +588,7 @@ mod tests {
             .complete(&mut small, &depth)
             .unwrap();
         assert_eq!(small, mask, "both components are below 85 px");
-        let stats = completion(80 * VGA_PER_PIXEL)
+        let stats = completion_without_support(80 * VGA_PER_PIXEL)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!((stats.completed, stats.dropped), (1, 1));

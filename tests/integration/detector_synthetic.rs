@@ -307,11 +307,12 @@ fn failure_class_head_on_approach() {
 
 /// Near background, a box sliding on a desk: the sub-threshold steps with which it covers the
 /// desk add up in the slow-change evidence (the paper's accumulation alone finds it only where
-/// it passes in front of the far wall: F1 0.615, onset 39). Measured F1 0.892, onset 7 (0.882,
+/// it passes in front of the far wall: F1 0.615, onset 39). Measured F1 0.900, onset 7 (0.892
+/// before the body completion kept growths without their support plane, docs/method.md D27; 0.882,
 /// 9 while a leaving object's remainder needed the full object size, docs/method.md D23; 0.880
 /// before occlusion events entered the evidence, D22; with the offline passes' DVO at 80×60
 /// and 160×120: 0.859, 12; without the temporal hysteresis 0.822, 13; true pose 0.831, 11);
-/// bounds F1 0.83, onset 9.
+/// bounds F1 0.85 (the target), onset 9.
 /// Onset: the box enters at the image corner (1 px at frame 2) through the sensor's invalid
 /// border ring: at frame 7 (onset 5) 84 of its 105 px have no depth, and on its 21 measured
 /// pixels the depth fell by at most 0.23 m since frame 6 (true poses; τ_α there is 0.24 m). Its visible part reaches the
@@ -319,12 +320,12 @@ fn failure_class_head_on_approach() {
 #[test]
 fn failure_class_sliding_on_desk() {
     let score = default_mode(Scenario::SlidingOnDesk);
-    assert_class(&score, "sliding_on_desk", 0.83, 9);
+    assert_class(&score, "sliding_on_desk", CLASS_F1_TARGET, 9);
 }
 
-/// The target for [`failure_class_sliding_on_desk`] (F1 met, onset not: F1 0.892, onset 7).
+/// The target for [`failure_class_sliding_on_desk`] (F1 met, onset not: F1 0.900, onset 7).
 #[test]
-#[ignore = "not met by the default: F1 0.892, onset 7 frames"]
+#[ignore = "not met by the default: F1 0.900, onset 7 frames"]
 fn failure_class_sliding_on_desk_target() {
     let score = default_mode(Scenario::SlidingOnDesk);
     assert_class(&score, "sliding_on_desk", CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
@@ -399,16 +400,17 @@ fn failure_class_static_desk() {
 /// Held out (no default was tuned on these; the slow-change evidence's parameters were chosen
 /// on the failure classes and the Bonn window, and these were run afterwards; reported apart,
 /// bounds looser): measured at 320×240 F1 / onset: in view at start 0.955 / 0, rests then
-/// moves 0.986 / 0, head-on 0.962 / 2, sliding on the floor 0.821 / 4, dominant from start
+/// moves 0.986 / 0, head-on 0.962 / 2, sliding on the floor 0.912 / 4 (0.821 before the
+/// support plane of docs/method.md D27, whose tolerance was chosen before it ran), dominant from start
 /// 0.975 / 0 (ATE 0.038 m; 0.235 / never before the body completion of docs/method.md D26,
 /// whose gates were chosen with this board in view, so it is no longer held out for D26);
 /// static 0 % false positives; a block standing on the floor, the floor in view, that fills
 /// more than half the view from the first frame (added after D26, run once as defined): F1
 /// 0.734 (P 1.000, R 0.613), onset 2, ATE 0.034 m. The odometry holds; where the floor the block
 /// stands on is in view, its growth meets the floor and the completion leaves the block as the
-/// passes marked it, the leading half (without the completion: F1 0.596, onset 63). Bounds:
-/// the targets where they are met (dominant: ATE 0.10 m); floor sliding and the block on the
-/// floor 0.04 below the F1, floor sliding 4 frames above the onset.
+/// passes marked it, the leading half (without the completion: F1 0.596, onset 63; unchanged
+/// by D27: the block's own face is its growth's largest plane). Bounds: the targets where
+/// they are met (dominant: ATE 0.10 m); the block on the floor 0.04 below the F1.
 #[test]
 fn held_out_scenarios() {
     for scenario in Scenario::HELD_OUT {
@@ -417,10 +419,10 @@ fn held_out_scenarios() {
         match scenario {
             Scenario::HeldOutInViewAtStart
             | Scenario::HeldOutRestsThenMoves
-            | Scenario::HeldOutHeadOnApproach => {
+            | Scenario::HeldOutHeadOnApproach
+            | Scenario::HeldOutSlidingOnFloor => {
                 assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES)
             }
-            Scenario::HeldOutSlidingOnFloor => assert_class(&score, name, 0.77, 8),
             Scenario::HeldOutDominantFromStart => {
                 assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
                 assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
