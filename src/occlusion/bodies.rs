@@ -1,4 +1,5 @@
-//! Completion of a detected part to the depth-connected body it belongs to (docs/method.md, D26).
+//! Completion of a detected part to the depth-connected body it belongs to (docs/method.md,
+//! D26 and D27).
 //!
 //! Occlusion accumulation marks the part of a moving object that covers something farther away:
 //! an object already in view when the recording starts, or one that slides along its own
@@ -9,8 +10,11 @@
 //! · Z(f)). Continuity stops the growth at the object's depth edges. A body that is continuous
 //! with a surface extending far in depth (a person standing on the floor, a box sliding on a
 //! desk) would take that surface in; so a component whose growth reaches a continuous pixel
-//! farther than `max_depth_band_m` from its median depth keeps none of it. What is kept is a
-//! body bounded by depth edges on every side that is not the image border.
+//! farther than `max_depth_band_m` from its median depth keeps none of it, unless the surface
+//! it is continuous with is a plane that can be taken out of the growth
+//! (`support_plane_tolerance_inv_m`, D27): the growth is then grown again without it. What is
+//! kept is a body bounded by depth edges, or by its support plane, on every side that is not
+//! the image border.
 //!
 //! Small components are left as they are: the false positives of a static scene are components
 //! near the minimum object size, and grown over the wall or cabinet they lie on they would
@@ -35,10 +39,12 @@ pub struct BodyCompletionConfig {
     /// are not grown.
     pub min_seed_pixels_vga: usize,
     /// A growth that reaches beyond the depth band is kept without its support surface when it
-    /// has one: the largest plane among the grown pixels (within the band) on which at most
-    /// [`SUPPORT_MAX_SEED_FRACTION`] of the component lies, within this tolerance in inverse
-    /// depth (1/m; a plane is linear in inverse depth across the image). What stays connected
-    /// to the component without that plane joins the mask. `None`: the growth is dropped.
+    /// has one: the largest plane among the grown pixels within the band, fitted with this
+    /// tolerance in inverse depth (1/m; a plane is linear in inverse depth across the image),
+    /// up to [`SUPPORT_MAX_PLANES`] of them until what the component reaches without them no
+    /// longer leaks; that joins the mask. A plane the component lies on (more than
+    /// [`SUPPORT_MAX_SEED_FRACTION`] of it) is never taken out: the growth is then dropped.
+    /// `None`: every leaking growth is dropped (docs/method.md D26 alone).
     pub support_plane_tolerance_inv_m: Option<f32>,
 }
 
