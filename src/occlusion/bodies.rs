@@ -153,6 +153,10 @@ pub struct BodyCompletion {
     depths: Vec<f32>,
     /// A leaking growth while its support planes are taken out.
     leaked_growth: Vec<u32>,
+    /// Points (column, row, inverse depth) sampled from the component and from what is left
+    /// of its leaking growth, for the support planes (at most [`SUPPORT_SAMPLE`] each).
+    seed_sample: Vec<[f32; 3]>,
+    grown_sample: Vec<[f32; 3]>,
 }
 
 /// Valid depth: positive and finite (0 and NaN mark missing measurements).
@@ -175,6 +179,8 @@ impl BodyCompletion {
             queue: Vec::with_capacity(size.area()),
             depths: Vec::with_capacity(size.area()),
             leaked_growth: Vec::new(),
+            seed_sample: Vec::with_capacity(SUPPORT_SAMPLE),
+            grown_sample: Vec::with_capacity(SUPPORT_SAMPLE),
         })
     }
 
@@ -341,12 +347,19 @@ impl BodyCompletion {
             (plane[0] * p[0] + plane[1] * p[1] + plane[2] - p[2]).abs() < tolerance
         };
         let stride = |n: usize| n.div_ceil(SUPPORT_SAMPLE).max(1);
-        let seed_sample: Vec<[f32; 3]> = self.queue[..seeds]
-            .iter()
-            .step_by(stride(seeds))
-            .filter(|&&i| has_depth(depth[i as usize]))
-            .map(|&i| point(i))
-            .collect();
+        // Taken out while `grow` needs `self`, and put back with their capacity.
+        let (mut seed_sample, mut grown_sample) = (
+            std::mem::take(&mut self.seed_sample),
+            std::mem::take(&mut self.grown_sample),
+        );
+        seed_sample.clear();
+        seed_sample.extend(
+            self.queue[..seeds]
+                .iter()
+                .step_by(stride(seeds))
+                .filter(|&&i| has_depth(depth[i as usize]))
+                .map(|&i| point(i)),
+        );
         // Hypotheses from triples of grown pixels, drawn by a fixed generator per component.
         let mut rng = (rng_seed as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
         let mut next = |n: usize| {
@@ -362,13 +375,14 @@ impl BodyCompletion {
                 .iter()
                 .filter(|&&i| self.state[i as usize] == OFF_PLANE)
                 .count();
-            let grown_sample: Vec<[f32; 3]> = self
-                .leaked_growth
-                .iter()
-                .filter(|&&i| self.state[i as usize] == OFF_PLANE)
-                .step_by(stride(remaining))
-                .map(|&i| point(i))
-                .collect();
+            grown_sample.clear();
+            grown_sample.extend(
+                self.leaked_growth
+                    .iter()
+                    .filter(|&&i| self.state[i as usize] == OFF_PLANE)
+                    .step_by(stride(remaining))
+                    .map(|&i| point(i)),
+            );
             if grown_sample.len() < 3 {
                 break;
             }
@@ -421,6 +435,7 @@ impl BodyCompletion {
         if !kept {
             self.queue.truncate(seeds);
         }
+        (self.seed_sample, self.grown_sample) = (seed_sample, grown_sample);
         kept
     }
 }
@@ -475,24 +490,17 @@ mod tests {
         depth
     }
 
-    fn completion(min_seed_pixels_vga: usize) -> BodyCompletion {
-        BodyCompletion::new(
-            ImageSize::new(64, 48),
-            BodyCompletionConfig {
-                min_seed_pixels_vga,
-                ..BodyCompletionConfig::default()
-            },
-        )
-        .unwrap()
-    }
+    /// The default support planes ([`completion`]'s `support_plane_tolerance_inv_m`).
+    const SUPPORT: Option<f32> = Some(DEFAULT_SUPPORT_PLANE_TOLERANCE_INV_M);
 
-    /// [`completion`] that drops every growth reaching beyond the band (D26 alone).
-    fn completion_without_support(min_seed_pixels_vga: usize) -> BodyCompletion {
+    /// A completion of 64×48 images; `support_plane_tolerance_inv_m` `None` drops every growth
+    /// reaching beyond the band (D26 alone).
+    fn completion(min_seed_pixels_vga: usize, support_plane_tolerance_inv_m: Option<f32>) -> BodyCompletion {
         BodyCompletion::new(
             ImageSize::new(64, 48),
             BodyCompletionConfig {
                 min_seed_pixels_vga,
-                support_plane_tolerance_inv_m: None,
+                support_plane_tolerance_inv_m,
                 ..BodyCompletionConfig::default()
             },
         )
@@ -519,7 +527,7 @@ mod tests {
         let depth = scene();
         let mut mask = Mask::filled(depth.size(), 0);
         mark(&mut mask, 26..30, 5..25);
-        let stats = completion(50 * VGA_PER_PIXEL)
+        let stats = completion(50 * VGA_PER_PIXEL, SUPPORT)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!(
@@ -540,7 +548,7 @@ mod tests {
         let mut mask = Mask::filled(depth.size(), 0);
         mark(&mut mask, 40..44, 20..41);
         let before = mask.clone();
-        let stats = completion_without_support(50 * VGA_PER_PIXEL)
+        let stats = completion(50 * VGA_PER_PIXEL, None)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!((stats.completed, stats.dropped, stats.added_pixels), (0, 1, 0));
@@ -552,7 +560,7 @@ mod tests {
         let depth = scene();
         let mut mask = Mask::filled(depth.size(), 0);
         mark(&mut mask, 40..44, 20..41);
-        let stats = completion(50 * VGA_PER_PIXEL)
+        let stats = completion(50 * VGA_PER_PIXEL, SUPPORT)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!((stats.completed, stats.dropped, stats.supported), (1, 0, 1));
@@ -576,7 +584,7 @@ mod tests {
         let mut mask = Mask::filled(depth.size(), 0);
         mark(&mut mask, 2..14, 34..44); // 120 px of floor
         let before = mask.clone();
-        let stats = completion(50 * VGA_PER_PIXEL)
+        let stats = completion(50 * VGA_PER_PIXEL, SUPPORT)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!((stats.completed, stats.dropped, stats.supported), (0, 1, 0));
@@ -590,11 +598,11 @@ mod tests {
         mark(&mut mask, 26..30, 5..25); // 80 px on the board
         mark(&mut mask, 40..44, 20..41); // 84 px on the box
         let mut small = mask.clone();
-        completion(85 * VGA_PER_PIXEL)
+        completion(85 * VGA_PER_PIXEL, SUPPORT)
             .complete(&mut small, &depth)
             .unwrap();
         assert_eq!(small, mask, "both components are below 85 px");
-        let stats = completion_without_support(80 * VGA_PER_PIXEL)
+        let stats = completion(80 * VGA_PER_PIXEL, None)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!((stats.completed, stats.dropped), (1, 1));
@@ -611,7 +619,7 @@ mod tests {
         depth.set(21, 10, f32::NAN);
         let mut mask = Mask::filled(depth.size(), 0);
         mark(&mut mask, 26..30, 5..25);
-        completion(50 * VGA_PER_PIXEL)
+        completion(50 * VGA_PER_PIXEL, SUPPORT)
             .complete(&mut mask, &depth)
             .unwrap();
         assert_eq!(mask.get(20, 10), 0);
@@ -626,7 +634,7 @@ mod tests {
         let depth = scene();
         let mut mask = Mask::filled(depth.size(), 0);
         mark(&mut mask, 26..30, 5..25);
-        let mut c = completion(50 * VGA_PER_PIXEL);
+        let mut c = completion(50 * VGA_PER_PIXEL, SUPPORT);
         c.complete(&mut mask, &depth).unwrap();
         let once = mask.clone();
         let stats = c.complete(&mut mask, &depth).unwrap();
