@@ -98,6 +98,7 @@ pub(crate) mod serde_util;
 pub mod synthetic;
 pub mod time;
 pub mod trajectory;
+pub(crate) mod xorshift;
 
 pub use convert::{convert_sequence, ConvertConfig, ConvertReport};
 pub use dataset::{DatasetKind, Sequence};

@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 use super::scaled_pixels;
 use crate::error::{Error, Result};
 use crate::image_buf::{neighbours_4, DepthMeters, ImageSize, Mask, MASK_SET};
+use crate::xorshift::XorShift64;
 
 /// Parameters of [`BodyCompletion`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -386,13 +387,8 @@ impl BodyCompletion {
                 .map(|&i| point(i)),
         );
         // Hypotheses from triples of grown pixels, drawn by a fixed generator per component.
-        let mut rng = (rng_seed as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
-        let mut next = |n: usize| {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            (rng % n as u64) as usize
-        };
+        let mut rng = XorShift64::new((rng_seed as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
+        let mut next = |n: usize| rng.below(n);
         let mut kept = false;
         for _ in 0..SUPPORT_MAX_PLANES {
             let remaining = self
@@ -656,13 +652,8 @@ mod tests {
 
     #[test]
     fn growing_from_the_boundary_matches_growing_from_every_component_pixel() {
-        let mut rng = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = |n: usize| {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            (rng % n as u64) as usize
-        };
+        let mut rng = XorShift64::new(0x2545_f491_4f6c_dd1d);
+        let mut next = |n: usize| rng.below(n);
         let mut seen = (0, 0, 0);
         for round in 0..200 {
             // The scene with holes in its depth and a few rectangles of mask over it.

@@ -296,13 +296,8 @@ mod tests {
     fn agrees_with_the_definition_on_random_scenes() {
         // Wider than two of the column pass's chunks, the last one partial.
         let size = ImageSize::new(71, 31);
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut rng = crate::xorshift::XorShift64::new(0x2545_f491_4f6c_dd1d);
+        let mut next = || rng.next_u64();
         let mut filled = 0;
         for scene in 0..200 {
             let mut mask = Mask::filled(size, 0);

@@ -526,13 +526,8 @@ mod tests {
     /// candidates, a restart halfway.
     #[test]
     fn the_incremental_sweep_matches_the_reference() {
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = move |n: u64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state % n
-        };
+        let mut rng = crate::xorshift::XorShift64::new(0x2545_f491_4f6c_dd1d);
+        let mut next = move |n: u64| rng.next_u64() % n;
         let frames = 40;
         let scenes: Vec<_> = (0..frames)
             .map(|index| {
