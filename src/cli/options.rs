@@ -28,9 +28,10 @@ pub struct WriteArgs {
     #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
     pub compression: CompressionArg,
 
-    /// Compression level (0 = the codec's default, 3 for zstd; 19 is smallest and slowest).
-    #[arg(long, default_value_t = DEFAULT_COMPRESSION_LEVEL)]
-    pub compression_level: u32,
+    /// Compression level (0 = the codec's default, 3 for zstd; 19 is smallest and slowest;
+    /// negative levels are the fast ones: -N is `zstd --fast=N`, lz4's acceleration N+1).
+    #[arg(long, default_value_t = DEFAULT_COMPRESSION_LEVEL, allow_negative_numbers = true)]
+    pub compression_level: i32,
 
     /// Uncompressed chunk size, MiB (at most 1024: a chunk is held in memory while written).
     #[arg(long, value_parser = parse_chunk_size_mib, default_value_t = (DEFAULT_CHUNK_SIZE_BYTES >> 20) as f64)]
@@ -189,6 +190,9 @@ mod tests {
         assert_eq!(o.chunk_size_bytes, 512 * 1024);
         assert_eq!(o.compression_threads, 0);
         assert!(Cli::try_parse_from(["x", "--chunk-size-mib", "0"]).is_err());
+        // The codecs' fast levels are negative.
+        let fast = Cli::try_parse_from(["x", "--compression-level", "-3"]).unwrap();
+        assert_eq!(fast.write.options().compression_level, -3);
     }
 
     #[test]

@@ -50,8 +50,8 @@ use crate::point_cloud::{OFFSET_RED, OFFSET_X, OFFSET_Y, OFFSET_Z, POINT_STRIDE_
 use super::codec;
 use super::encoding::DepthEncoding;
 use super::input::{ExtraRecord, McapInput};
-use super::writer::{Compression, McapWriteOptions};
-use super::{ENCODING_PROTOBUF, FRAME_WORLD, LIBRARY, SCHEMA_FRAME_TRANSFORM, TOPIC_TF};
+use super::writer::McapWriteOptions;
+use super::{ENCODING_PROTOBUF, FRAME_WORLD, SCHEMA_FRAME_TRANSFORM, TOPIC_TF};
 
 /// Moving-object mask, `mono8`.
 pub const TOPIC_MASK: &str = "/occmask/mask";
@@ -322,22 +322,8 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
     /// # Errors
     /// [`Error::Mcap`] when a record cannot be written; I/O errors reading the input's extras.
     pub fn new(sink: W, input: &McapInput, options: &AnnotateOptions) -> Result<Self> {
-        let compression = match options.write.compression {
-            Compression::Zstd => Some(mcap::Compression::Zstd),
-            Compression::Lz4 => Some(mcap::Compression::Lz4),
-            Compression::None => None,
-        };
         let profile = if options.copy_input { input.profile() } else { "" };
-        let mut writer = mcap::WriteOptions::new()
-            .library(LIBRARY)
-            .profile(profile)
-            .compression(compression)
-            // The level was not passed before, so zstd ran at its default level 3 (10–14 % of
-            // the process CPU on tum_fr2_desk_50); level 1, as `convert` uses, is faster.
-            .compression_level(options.write.compression_level)
-            .chunk_size(Some(options.write.chunk_size_bytes))
-            .compression_threads(options.write.compression_threads)
-            .create(sink)?;
+        let mut writer = options.write.mcap_options().profile(profile).create(sink)?;
         let mut deferred = Vec::new();
         if options.copy_input {
             for s in input.schemas().values() {

@@ -20,8 +20,7 @@ use crate::image_buf::ImageSize;
 use crate::time::split_ns;
 
 use super::input::{ros1, ros2};
-use super::writer::{Compression, McapWriteOptions};
-use super::LIBRARY;
+use super::writer::McapWriteOptions;
 
 /// Which ROS generation's conventions to write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -240,19 +239,7 @@ impl<W: Write + Seek> RosMcapWriter<W> {
     /// # Errors
     /// [`Error::Mcap`] when the header cannot be written.
     pub fn new(sink: W, version: RosVersion, options: &McapWriteOptions) -> Result<Self> {
-        let compression = match options.compression {
-            Compression::Zstd => Some(mcap::Compression::Zstd),
-            Compression::Lz4 => Some(mcap::Compression::Lz4),
-            Compression::None => None,
-        };
-        let writer = mcap::WriteOptions::new()
-            .library(LIBRARY)
-            .profile(version.profile())
-            .compression(compression)
-            .compression_level(options.compression_level)
-            .chunk_size(Some(options.chunk_size_bytes))
-            .compression_threads(options.compression_threads)
-            .create(sink)?;
+        let writer = options.mcap_options().profile(version.profile()).create(sink)?;
         Ok(Self {
             writer,
             version,
