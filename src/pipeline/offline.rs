@@ -395,14 +395,26 @@ struct NearLayer {
 
 /// Passes 2 and 3, and the frames they work on.
 struct LaterPasses {
-    source: PoseSource,
-    appearance_growth: bool,
     /// Pass 2.
-    backward: OcclusionDetector,
-    /// Pass 3.
-    refine: Processor,
+    backward: BackwardPass,
     /// Frames after pass 1 whose backward pass has not run: the next block and its look-ahead.
     buffer: VecDeque<Buffered>,
+    /// Pass 3.
+    refinement: Refinement,
+}
+
+/// Pass 2's detector and scratch.
+struct BackwardPass {
+    detector: OcclusionDetector,
+    appearance_growth: bool,
+    /// Scratch: a buffered frame's gray as f32 (appearance growth only).
+    gray: GrayF32,
+}
+
+/// Pass 3, the frames waiting for it, and what it emits.
+struct Refinement {
+    source: PoseSource,
+    refine: Processor,
     /// Frames after the backward pass, waiting for refinement (in order).
     ready: VecDeque<Buffered>,
     /// Recycled frame buffers.
@@ -528,22 +540,34 @@ impl OfflineProcessor {
                 near_layer,
             },
             later: LaterPasses {
-                source: config.pose_source,
-                appearance_growth: config.occlusion.appearance_growth.is_some(),
-                backward: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
-                refine,
+                backward: BackwardPass {
+                    detector: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
+                    appearance_growth: config.occlusion.appearance_growth.is_some(),
+                    gray: GrayF32::filled(
+                        if config.occlusion.appearance_growth.is_some() {
+                            size
+                        } else {
+                            ImageSize::new(0, 0)
+                        },
+                        0.0,
+                    ),
+                },
                 buffer: VecDeque::new(),
-                ready: VecDeque::new(),
-                spare: Vec::new(),
-                size,
-                gray: GrayF32::filled(size, 0.0),
-                mask: Mask::filled(size, 0),
-                previous_seed_mask: Mask::filled(size, 0),
-                has_previous_seed_mask: false,
-                hysteresis,
-                bodies: body_completion
-                    .map(|c| BodyCompletion::new(size, c))
-                    .transpose()?,
+                refinement: Refinement {
+                    source: config.pose_source,
+                    refine,
+                    ready: VecDeque::new(),
+                    spare: Vec::new(),
+                    size,
+                    gray: GrayF32::filled(size, 0.0),
+                    mask: Mask::filled(size, 0),
+                    previous_seed_mask: Mask::filled(size, 0),
+                    has_previous_seed_mask: false,
+                    hysteresis,
+                    bodies: body_completion
+                        .map(|c| BodyCompletion::new(size, c))
+                        .transpose()?,
+                },
             },
             registration,
             registration_decision: None,
@@ -587,21 +611,21 @@ impl OfflineProcessor {
         }
         let window = self.config.block_frames + self.config.lookahead_frames;
         let refinement_due =
-            frame.is_none() || self.later.buffer.len() >= window || !self.later.ready.is_empty();
+            frame.is_none() || self.later.buffer.len() >= window || !self.later.refinement.ready.is_empty();
         if check.frames_seen < check.config.frames && !refinement_due {
             return Ok(());
         }
         let score = quantile(&mut check.scores, 0.5);
         let registered = score.is_none_or(|score| score >= check.config.min_score);
         if !registered {
-            let size = self.later.size;
-            self.later.refine = Processor::new(size, check.intrinsics, check.refine)?;
+            let refinement = &mut self.later.refinement;
+            let size = refinement.size;
+            refinement.refine = Processor::new(size, check.intrinsics, check.refine)?;
             let offline = OfflineConfig {
                 hysteresis_frames: check.config.hysteresis_frames,
                 ..self.config
             };
-            self.later.hysteresis = self
-                .later
+            refinement.hysteresis = refinement
                 .refine
                 .detector()
                 .config()
@@ -619,9 +643,10 @@ impl OfflineProcessor {
 
     /// Frames pushed but not yet emitted.
     pub fn pending_frames(&self) -> usize {
+        let refinement = &self.later.refinement;
         self.later.buffer.len()
-            + self.later.ready.len()
-            + self.later.hysteresis.as_ref().map_or(0, Hysteresis::len)
+            + refinement.ready.len()
+            + refinement.hysteresis.as_ref().map_or(0, Hysteresis::len)
     }
 
     /// Adds the next frame (frames in time order). Calls `emit` for every frame whose result
@@ -632,13 +657,16 @@ impl OfflineProcessor {
     /// # Errors
     /// As [`Processor::process`], and whatever `emit` returns.
     pub fn push(&mut self, frame: &FrameInput<'_>, emit: &mut Emit<'_>) -> Result<()> {
-        let size = self.later.size;
+        let size = self.later.refinement.size;
         check_size("gray image", frame.gray.size(), size)?;
         check_size("depth image", frame.depth_m.size(), size)?;
         self.check_registration(Some(frame))?;
-        let mut buffered = self.later.spare.pop().unwrap_or_else(|| {
+        let mut buffered = self.later.refinement.spare.pop().unwrap_or_else(|| {
             // The detector leaves the evidence out on small images (then the two masks agree).
-            Buffered::new(size, self.later.backward.config().slow_evidence.is_some())
+            Buffered::new(
+                size,
+                self.later.backward.detector.config().slow_evidence.is_some(),
+            )
         });
         let (first, later, config) = (&mut self.first, &mut self.later, &self.config);
         let (first_done, later_done) = rayon::join(
@@ -657,14 +685,25 @@ impl OfflineProcessor {
     /// As [`Self::push`].
     pub fn finish(&mut self, emit: &mut Sink<'_>) -> Result<()> {
         self.check_registration(None)?;
-        let later = &mut self.later;
-        later.refine_ready(later.ready.len(), emit)?;
+        let LaterPasses {
+            backward,
+            buffer,
+            refinement,
+        } = &mut self.later;
         // One backward pass keeps every frame still buffered: block by block, each pass would
         // start a fresh detector at the same last frame and recompute the later blocks' masks.
-        let n = later.buffer.len();
-        later.backward_pass(n)?;
-        later.refine_ready(later.ready.len(), emit)?;
-        if let Some(hysteresis) = &mut later.hysteresis {
+        // It runs beside the refinement of the frames already past it (the two read different
+        // frames); `emit` stays on the caller's thread.
+        let mut backward_done = Ok(());
+        let refined = rayon::in_place_scope(|scope| {
+            scope.spawn(|_| backward_done = backward.run(buffer, buffer.len()));
+            refinement.refine_ready(refinement.ready.len(), emit)
+        });
+        refined?;
+        backward_done?;
+        refinement.ready.extend(buffer.drain(..));
+        refinement.refine_ready(refinement.ready.len(), emit)?;
+        if let Some(hysteresis) = &mut refinement.hysteresis {
             hysteresis.flush(emit)?;
         }
         Ok(())
@@ -754,23 +793,34 @@ impl LaterPasses {
         }
         // This push and the ones after it until the buffer is full again.
         let pushes_left = window.saturating_sub(self.buffer.len()).max(1);
-        self.refine_ready(self.ready.len().div_ceil(pushes_left), emit)
+        let refinement = &mut self.refinement;
+        refinement.refine_ready(refinement.ready.len().div_ceil(pushes_left), emit)
     }
 
-    /// Pass 2: a fresh detector from the last buffered frame back to the first; the first `n`
-    /// frames, their backward masks kept, then wait for refinement.
+    /// Pass 2 over every buffered frame; the first `n` then wait for refinement.
     fn backward_pass(&mut self, n: usize) -> Result<()> {
-        self.backward.reset();
+        self.backward.run(&mut self.buffer, n)?;
+        let n = n.min(self.buffer.len());
+        self.refinement.ready.extend(self.buffer.drain(..n));
+        Ok(())
+    }
+}
+
+impl BackwardPass {
+    /// A fresh detector from the last frame of `buffer` back to the first; the first `keep`
+    /// frames keep their backward masks.
+    fn run(&mut self, buffer: &mut VecDeque<Buffered>, keep: usize) -> Result<()> {
+        self.detector.reset();
         // The pose of the detector's previous frame (the later one in time).
         let mut reference: Option<Isometry3<f64>> = None;
-        for j in (0..self.buffer.len()).rev() {
+        for j in (0..buffer.len()).rev() {
             // A jump between frames j and j + 1 (the first pass reset its detector at j + 1)
             // is the same jump backwards.
-            if self.buffer.get(j + 1).is_some_and(|later| later.first_reset) {
-                self.backward.reset();
+            if buffer.get(j + 1).is_some_and(|later| later.first_reset) {
+                self.detector.reset();
                 reference = None;
             }
-            let frame = &mut self.buffer[j];
+            let frame = &mut buffer[j];
             if !frame.has_depth {
                 frame.backward_mask.fill(0);
                 if let Some(seed) = &mut frame.backward_odometry_mask {
@@ -788,25 +838,25 @@ impl LaterPasses {
                 None
             };
             let mask = self
-                .backward
+                .detector
                 .update_with_gray(&frame.depth_m, gray, &current_from_previous)?;
-            if j < n {
+            if j < keep {
                 frame
                     .backward_mask
                     .as_mut_slice()
                     .copy_from_slice(mask.as_slice());
                 if let Some(seed) = &mut frame.backward_odometry_mask {
                     seed.as_mut_slice()
-                        .copy_from_slice(self.backward.odometry_mask().as_slice());
+                        .copy_from_slice(self.detector.odometry_mask().as_slice());
                 }
             }
             reference = Some(frame.world_from_camera);
         }
-        let n = n.min(self.buffer.len());
-        self.ready.extend(self.buffer.drain(..n));
         Ok(())
     }
+}
 
+impl Refinement {
     /// Pass 3 and `emit` for the first `count` waiting frames, which are then recycled.
     fn refine_ready(&mut self, count: usize, emit: &mut Sink<'_>) -> Result<()> {
         for _ in 0..count {

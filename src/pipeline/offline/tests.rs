@@ -349,7 +349,7 @@ fn colour_moved_off_the_depth_is_found_not_registered() {
             ..ProcessorConfig::default()
         };
         let mut processor = OfflineProcessor::new(size, intrinsics, config).expect("valid config");
-        assert!(processor.later.hysteresis.is_some());
+        assert!(processor.later.refinement.hysteresis.is_some());
         let mut keep = |_: FrameOutput<'_>| Ok(());
         for i in 0..frames {
             let input = FrameInput {
@@ -369,7 +369,7 @@ fn colour_moved_off_the_depth_is_found_not_registered() {
             "shift {shift} px: score {score:?}"
         );
         assert_eq!(
-            processor.later.hysteresis.is_some(),
+            processor.later.refinement.hysteresis.is_some(),
             registered,
             "shift {shift} px"
         );
@@ -405,14 +405,20 @@ fn one_backward_pass_at_the_end_gives_the_masks_of_block_by_block_passes() {
         one_pass.finish(&mut |out| record(&mut a, &out)).expect("finish");
         let later = &mut by_block.later;
         let mut emit = |out: FrameOutput<'_>| record(&mut b, &out);
-        later.refine_ready(later.ready.len(), &mut emit).expect("refine");
+        let refine_ready = |later: &mut LaterPasses, emit: &mut Sink<'_>| {
+            let refinement = &mut later.refinement;
+            refinement
+                .refine_ready(refinement.ready.len(), emit)
+                .expect("refine");
+        };
+        refine_ready(later, &mut emit);
         while !later.buffer.is_empty() {
             later
                 .backward_pass(block.min(later.buffer.len()))
                 .expect("backward");
-            later.refine_ready(later.ready.len(), &mut emit).expect("refine");
+            refine_ready(later, &mut emit);
         }
-        if let Some(hysteresis) = &mut later.hysteresis {
+        if let Some(hysteresis) = &mut later.refinement.hysteresis {
             hysteresis.flush(&mut emit).expect("flush");
         }
         assert_eq!(a.len(), frames);
