@@ -256,6 +256,7 @@ pub fn outer_contours(mask: &Mask, options: &ContourOptions) -> Vec<Polygon> {
 mod tests {
     use super::*;
     use crate::image_buf::ImageSize;
+    use crate::xorshift::XorShift64;
 
     fn mask_from(rows: &[&str]) -> Mask {
         let size = ImageSize::new(rows[0].len(), rows.len());
@@ -280,13 +281,10 @@ mod tests {
     #[test]
     fn loop_areas_equal_pixel_counts_for_random_masks() {
         // Law: outer areas minus hole areas = number of set pixels, for any mask.
-        let mut state = 12345u64;
+        let mut rng = XorShift64::new(12345);
         for _ in 0..50 {
             let m = Mask::from_fn(ImageSize::new(23, 17), |_, _| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                if (state >> 33).is_multiple_of(3) {
+                if rng.below(3) == 0 {
                     MASK_SET
                 } else {
                     0
@@ -303,14 +301,9 @@ mod tests {
     /// against a plain one.
     #[test]
     fn boundary_edges_match_the_per_pixel_definition() {
-        let mut state = 99u64;
+        let mut rng = XorShift64::new(99);
         for (w, h) in [(23, 17), (1, 9), (9, 1), (64, 3)] {
-            let m = Mask::from_fn(ImageSize::new(w, h), |_, _| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                [MASK_SET, 0, 0, 7][(state >> 33) as usize % 4]
-            });
+            let m = Mask::from_fn(ImageSize::new(w, h), |_, _| [MASK_SET, 0, 0, 7][rng.below(4)]);
             let set = |x: i64, y: i64| {
                 x >= 0 && y >= 0 && x < w as i64 && y < h as i64 && m.get(x as usize, y as usize) == MASK_SET
             };

@@ -1,6 +1,6 @@
 //! A small deterministic pseudo-random generator (Marsaglia's xorshift64, shifts 13/7/17) for
 //! draws that must repeat exactly from run to run: the body completion's plane hypotheses and
-//! the random scenes of tests. Not for anything that needs statistical quality.
+//! the random inputs of tests. Not for anything that needs statistical quality.
 
 /// xorshift64 state; never zero (zero is its fixed point).
 #[derive(Debug, Clone)]
@@ -27,6 +27,12 @@ impl XorShift64 {
     pub(crate) fn below(&mut self, n: usize) -> usize {
         (self.next_u64() % n as u64) as usize
     }
+
+    /// Uniform in [0, 1), from the next state's top 24 bits.
+    #[cfg(test)]
+    pub(crate) fn unit_f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
 }
 
 #[cfg(test)]
@@ -44,5 +50,9 @@ mod tests {
         assert!(first.iter().all(|&x| x != 0));
         assert_eq!(first, (0..5).map(|_| b.next_u64()).collect::<Vec<_>>());
         assert!((0..1000).all(|_| a.below(7) < 7));
+        let units: Vec<f32> = (0..1000).map(|_| a.unit_f32()).collect();
+        assert!(units.iter().all(|u| (0.0..1.0).contains(u)));
+        let mean = units.iter().sum::<f32>() / units.len() as f32;
+        assert!((mean - 0.5).abs() < 0.05, "mean {mean}");
     }
 }

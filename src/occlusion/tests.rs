@@ -6,6 +6,7 @@ use super::transport::{
 use super::*;
 use crate::image_buf::MASK_SET;
 use crate::synthetic::{DepthSensorModel, Scenario, SequenceConfig, SyntheticSequence};
+use crate::xorshift::XorShift64;
 
 const SIZE: ImageSize = ImageSize::new(160, 120);
 
@@ -644,13 +645,8 @@ fn object_mask_builds_match_the_definition() {
     // Random A around the threshold, depths with holes, P̂ and Ñ flags: the baseline and AVX2
     // builds give exactly O = {A > τ_α}, P = (P̂ ∨ Ñ) ∧ O and the labels of P.
     let len = 1000;
-    let mut state = 77u64;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((state >> 33) % 1000) as f32 / 1000.0
-    };
+    let mut rng = XorShift64::new(77);
+    let mut next = || rng.below(1000) as f32 / 1000.0;
     let z: Vec<f32> = (0..len)
         .map(|_| if next() < 0.1 { 0.0 } else { 0.5 + 4.0 * next() })
         .collect();

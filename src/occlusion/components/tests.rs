@@ -1,5 +1,6 @@
 use super::oracles::{flood_scalar, square_filter_scalar, UNLABELLED};
 use super::*;
+use crate::xorshift::XorShift64;
 
 /// The components of `set` by the reference flood fill, in seed (row-major) order, each as
 /// its sorted pixels.
@@ -18,13 +19,8 @@ fn label_all(set: &[u8], size: ImageSize) -> Vec<Vec<u32>> {
 
 #[test]
 fn chunked_scans_match_the_reference_scans() {
-    let mut state = 4242u64;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 33) as u32
-    };
+    let mut rng = XorShift64::new(4242);
+    let mut next = || (rng.next_u64() >> 33) as u32;
     // Hits from dense to absent, lengths around the chunk size.
     for len in [0, 1, 31, 32, 33, 64, 100, 257] {
         for one_in in [1, 5, 40, 1000, u32::MAX] {
@@ -68,13 +64,8 @@ fn chunked_scans_match_the_reference_scans() {
 #[test]
 fn run_labelling_matches_the_reference_flood_fill() {
     let size = ImageSize::new(67, 29);
-    let mut state = 13579u64;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 33) as u32
-    };
+    let mut rng = XorShift64::new(13579);
+    let mut next = || (rng.next_u64() >> 33) as u32;
     let mut runs = RunLabelling::new(size.width, size.height);
     // Sparse to dense random sets (many touching runs, diagonal contacts), plus runs that
     // reach the window's edges.
@@ -136,13 +127,8 @@ fn run_labelling_matches_the_reference_flood_fill() {
 #[test]
 fn run_pruning_matches_the_reference_pruning() {
     let size = ImageSize::new(71, 43);
-    let mut state = 2468u64;
-    let mut next = |n: usize| {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 33) as usize % n
-    };
+    let mut rng = XorShift64::new(2468);
+    let mut next = |n: usize| rng.below(n);
     let (mut some_pruned, mut some_kept, mut some_leaving) = (false, false, false);
     for trial in 0..12 {
         // Object rectangles, predicted rectangles (and scattered pixels) inside the objects,
@@ -242,13 +228,8 @@ fn run_pruning_matches_the_reference_pruning() {
 #[test]
 fn prediction_with_stamps_near_the_target_matches_stamping_every_source() {
     let size = ImageSize::new(97, 71);
-    let mut state = 8642u64;
-    let mut next = |n: usize| {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 33) as usize % n
-    };
+    let mut rng = XorShift64::new(8642);
+    let mut next = |n: usize| rng.below(n);
     let mut predicted_total = 0;
     for trial in 0..8 {
         // Rectangles (some wider than a stamp segment, some small) with a band of Ñ on one
@@ -347,16 +328,13 @@ fn prediction_with_stamps_near_the_target_matches_stamping_every_source() {
 #[test]
 fn thin_structure_opening_on_the_bounding_box_matches_the_whole_image() {
     let size = ImageSize::new(61, 47);
-    let mut state = 555u64;
+    let mut rng = XorShift64::new(555);
     // A blob with noisy edges and thin strips inside [10, 50) × [5, 40).
     let set: Vec<u8> = (0..size.area())
         .map(|i| {
             let (x, y) = (i % size.width, i / size.width);
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
             let inside = (10..50).contains(&x) && (5..40).contains(&y);
-            u8::from(inside && (state >> 33) % 10 < 7)
+            u8::from(rng.below(10) < 7 && inside)
         })
         .collect();
     let bounding = PixelBounds {
@@ -398,19 +376,17 @@ fn thin_structure_opening_on_the_bounding_box_matches_the_whole_image() {
 fn thin_structure_reconnection_keeps_the_set_within_its_geodesic_distance_of_the_opening() {
     let size = ImageSize::new(53, 41);
     let (width, height) = (size.width, size.height);
-    let mut state = 2024u64;
+    let mut rng = XorShift64::new(2024);
     let mut previous_kept = 0;
     let set: Vec<u8> = (0..size.area())
         .map(|i| {
             let (x, y) = (i % width, i / width);
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            let noise = rng.below(10) < 3;
             // A solid block with a one-pixel limb, scattered noise and a detached strip.
             let block = (8..20).contains(&x) && (8..20).contains(&y);
             let limb = y == 14 && (20..40).contains(&x);
             let strip = x == 45 && (5..35).contains(&y);
-            u8::from(block || limb || strip || (state >> 33) % 10 < 3)
+            u8::from(block || limb || strip || noise)
         })
         .collect();
     let whole = PixelBounds {
@@ -464,15 +440,8 @@ fn thin_structure_reconnection_keeps_the_set_within_its_geodesic_distance_of_the
 #[test]
 fn sliding_square_filter_matches_the_definition() {
     let (width, height) = (37, 23);
-    let mut state = 12345u64;
-    let image: Vec<u8> = (0..width * height)
-        .map(|_| {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            u8::from(!(state >> 33).is_multiple_of(3))
-        })
-        .collect();
+    let mut rng = XorShift64::new(12345);
+    let image: Vec<u8> = (0..width * height).map(|_| u8::from(rng.below(3) != 0)).collect();
     for r in 0..4 {
         for erode in [true, false] {
             let mut fast = vec![7; image.len()];

@@ -1,6 +1,7 @@
 use super::super::components::NEIGHBOURS_8;
 use super::*;
 use crate::image_buf::MASK_SET;
+use crate::xorshift::XorShift64;
 
 /// The detector's end of frame: keeps `gray` and hands `mask` over as the previous mask.
 fn remember_frame(state: &mut AppearanceGrowth, gray: &GrayF32, mask: &Mask) {
@@ -187,23 +188,6 @@ fn unbounded() -> AppearanceGrowthConfig {
     }
 }
 
-/// xorshift64*: deterministic pseudo-random numbers for the agreement test.
-struct Random(u64);
-
-impl Random {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
 /// A random scene: depth steps between a few planes (with holes), random textures, masks
 /// of random rectangles with speckle holes touching the image border, a previous mask
 /// that overlaps them, and a small camera motion.
@@ -219,14 +203,14 @@ struct Scene {
 }
 
 fn random_scene(seed: u64) -> Scene {
-    let mut random = Random(seed | 1);
+    let mut random = XorShift64::new(seed | 1);
     // Odd sizes: the seed scan's 8-pixel words end in a partial word.
     let size = ImageSize::new(
-        61 + (random.next() % 40) as usize,
-        37 + (random.next() % 30) as usize,
+        61 + (random.next_u64() % 40) as usize,
+        37 + (random.next_u64() % 30) as usize,
     );
-    let planes: Vec<f32> = (0..3).map(|_| 1.0 + 3.0 * random.unit()).collect();
-    let split = (random.next() % size.width as u64) as usize;
+    let planes: Vec<f32> = (0..3).map(|_| 1.0 + 3.0 * random.unit_f32()).collect();
+    let split = (random.next_u64() % size.width as u64) as usize;
     let depth = Image::from_fn(size, |x, y| {
         let plane = usize::from(x >= split) + usize::from(y % 17 < 5);
         let slope = 0.002 * x as f32;
@@ -236,32 +220,35 @@ fn random_scene(seed: u64) -> Scene {
             planes[plane] + slope
         }
     });
-    let previous_gray = Image::from_fn(size, |_, _| random.unit());
+    let previous_gray = Image::from_fn(size, |_, _| random.unit_f32());
     // Half the pixels keep their previous value, the others change (texture moved).
     let gray = Image::from_fn(size, |x, y| {
-        if random.next().is_multiple_of(2) {
+        if random.next_u64().is_multiple_of(2) {
             previous_gray.get(x, y)
         } else {
-            random.unit()
+            random.unit_f32()
         }
     });
     let mut mask: Mask = Image::filled(size, 0);
     for _ in 0..4 {
         let (x0, y0) = (
-            random.next() as usize % size.width,
-            random.next() as usize % size.height,
+            random.next_u64() as usize % size.width,
+            random.next_u64() as usize % size.height,
         );
-        let (w, h) = (1 + random.next() as usize % 25, 1 + random.next() as usize % 20);
+        let (w, h) = (
+            1 + random.next_u64() as usize % 25,
+            1 + random.next_u64() as usize % 20,
+        );
         for y in y0..(y0 + h).min(size.height) {
             for x in x0..(x0 + w).min(size.width) {
-                if !random.next().is_multiple_of(11) {
+                if !random.next_u64().is_multiple_of(11) {
                     mask.set(x, y, MASK_SET);
                 }
             }
         }
     }
     let previous_mask = Image::from_fn(size, |x, y| {
-        if x > 0 && mask.get(x - 1, y) != 0 || random.next().is_multiple_of(5) {
+        if x > 0 && mask.get(x - 1, y) != 0 || random.next_u64().is_multiple_of(5) {
             MASK_SET
         } else {
             0
@@ -269,14 +256,14 @@ fn random_scene(seed: u64) -> Scene {
     });
     let accumulation = Image::from_fn(size, |x, y| {
         if mask.get(x, y) != 0 {
-            0.2 + random.unit()
+            0.2 + random.unit_f32()
         } else {
             0.0
         }
     });
     let motion = Isometry3::new(
-        nalgebra::Vector3::new(0.01 * f64::from(random.unit()), -0.005, 0.02),
-        nalgebra::Vector3::new(0.0, 0.01 * f64::from(random.unit()), 0.003),
+        nalgebra::Vector3::new(0.01 * f64::from(random.unit_f32()), -0.005, 0.02),
+        nalgebra::Vector3::new(0.0, 0.01 * f64::from(random.unit_f32()), 0.003),
     );
     Scene {
         size,
