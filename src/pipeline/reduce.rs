@@ -57,7 +57,9 @@ impl Reduced {
 
 /// `image` into `full`: copied at the same size, else enlarged by the nearest pixel from the
 /// image halved some number of times; rows and columns beyond the reduced image's cover (odd
-/// sides) take its last ones.
+/// sides) take its last ones. Each reduced row is widened once and the full rows it covers
+/// after the first are copies of that one (tested against the per-pixel
+/// [`copy_or_enlarge_reference`]).
 pub(crate) fn copy_or_enlarge<T: Copy + Default>(image: &Image<T>, full: &mut Image<T>) {
     if image.size() == full.size() {
         full.as_mut_slice().copy_from_slice(image.as_slice());
@@ -65,11 +67,39 @@ pub(crate) fn copy_or_enlarge<T: Copy + Default>(image: &Image<T>, full: &mut Im
     }
     let (rw, rh) = (image.width(), image.height());
     let fw = full.width();
-    if rw == 0 || rh == 0 {
+    if rw == 0 || rh == 0 || fw == 0 {
         full.fill(T::default());
         return;
     }
-    let halvings = (full.width() / rw).max(1).ilog2();
+    let halvings = (fw / rw).max(1).ilog2();
+    let factor = 1usize << halvings;
+    let covered = (rw * factor).min(fw);
+    let src = image.as_slice();
+    let out = full.as_mut_slice();
+    let mut previous_ry = None;
+    for y in 0..out.len() / fw {
+        let ry = (y >> halvings).min(rh - 1);
+        let (done, rest) = out.split_at_mut(y * fw);
+        let row = &mut rest[..fw];
+        if previous_ry == Some(ry) {
+            row.copy_from_slice(&done[(y - 1) * fw..]);
+            continue;
+        }
+        let src_row = &src[ry * rw..(ry + 1) * rw];
+        for (block, &v) in row[..covered].chunks_mut(factor).zip(src_row) {
+            block.fill(v);
+        }
+        row[covered..].fill(src_row[rw - 1]);
+        previous_ry = Some(ry);
+    }
+}
+
+/// The per-pixel definition of [`copy_or_enlarge`]'s enlargement.
+#[cfg(test)]
+fn copy_or_enlarge_reference<T: Copy + Default>(image: &Image<T>, full: &mut Image<T>) {
+    let (rw, rh) = (image.width(), image.height());
+    let fw = full.width();
+    let halvings = (fw / rw).max(1).ilog2();
     let src = image.as_slice();
     for (y, row) in full.as_mut_slice().chunks_exact_mut(fw).enumerate() {
         let ry = (y >> halvings).min(rh - 1);
@@ -117,6 +147,29 @@ mod tests {
             [0, 0, 3, 3, 0, 0, 0],
         ];
         assert_eq!(full.as_slice(), expected.concat().as_slice());
+    }
+
+    #[test]
+    fn enlarging_matches_the_per_pixel_definition() {
+        let mut rng = crate::xorshift::XorShift64::new(31);
+        let mut checked = 0;
+        for halvings in 1..=3u32 {
+            for (rw, rh) in [(1, 1), (1, 5), (6, 1), (7, 4), (13, 9)] {
+                let factor = 1usize << halvings;
+                // The full image's odd sides: up to factor − 1 more columns and rows.
+                for extra in [0, factor - 1] {
+                    let reduced = DepthMeters::from_fn(ImageSize::new(rw, rh), |_, _| rng.below(1000) as f32);
+                    let size = ImageSize::new(rw * factor + extra, rh * factor + extra / 2);
+                    let mut fast = DepthMeters::filled(size, -1.0);
+                    let mut reference = DepthMeters::filled(size, -2.0);
+                    copy_or_enlarge(&reduced, &mut fast);
+                    copy_or_enlarge_reference(&reduced, &mut reference);
+                    assert!(fast.as_slice() == reference.as_slice(), "{rw}x{rh} into {size:?}");
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 30);
     }
 
     #[test]
