@@ -406,8 +406,8 @@ struct LaterPasses {
 /// Pass 2's detector and scratch.
 struct BackwardPass {
     detector: OcclusionDetector,
-    appearance_growth: bool,
-    /// Scratch: a buffered frame's gray as f32 (appearance growth only).
+    /// Scratch: a buffered frame's gray as f32 (0×0 unless the detector's appearance growth
+    /// is on).
     gray: GrayF32,
 }
 
@@ -542,12 +542,10 @@ impl OfflineProcessor {
             later: LaterPasses {
                 backward: BackwardPass {
                     detector: OcclusionDetector::new(size, intrinsics, config.occlusion)?,
-                    appearance_growth: config.occlusion.appearance_growth.is_some(),
                     gray: GrayF32::filled(
-                        if config.occlusion.appearance_growth.is_some() {
-                            size
-                        } else {
-                            ImageSize::new(0, 0)
+                        match config.occlusion.appearance_growth {
+                            Some(_) => size,
+                            None => ImageSize::new(0, 0),
                         },
                         0.0,
                     ),
@@ -831,7 +829,7 @@ impl BackwardPass {
             let current_from_previous = reference.map_or_else(Isometry3::identity, |previous| {
                 frame.world_from_camera.inverse() * previous
             });
-            let gray = if self.appearance_growth {
+            let gray = if self.detector.config().appearance_growth.is_some() {
                 dequantize_gray_into(&frame.gray, &mut self.gray);
                 Some(&self.gray)
             } else {
