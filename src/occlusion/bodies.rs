@@ -304,24 +304,24 @@ impl BodyCompletion {
     fn grow(&mut self, mask: &[u8], depth: &[f32], median: f32, candidate: u8, stop_at_leak: bool) -> bool {
         let (w, h) = (self.size.width, self.size.height);
         let (step, band) = (self.config.max_depth_step_fraction, self.config.max_depth_band_m);
-        let mut leaked = false;
-        let seeds = self.queue.len();
-        let mut head = 0;
-        while head < self.boundary.len() + self.queue.len() - seeds {
-            let i = if head < self.boundary.len() {
-                self.boundary[head]
-            } else {
-                self.queue[seeds + head - self.boundary.len()]
-            } as usize;
-            head += 1;
+        let Self {
+            state,
+            queue,
+            boundary,
+            ..
+        } = self;
+        // Visits pixel `i`: its continuous neighbours within the band join the growth; returns
+        // whether one beyond the band was reached (at the first such one when `stop_at_leak`).
+        let mut visit = |i: usize, queue: &mut Vec<u32>| {
             let z = depth[i];
+            let mut leaked = false;
             if !has_depth(z) {
-                continue;
+                return false;
             }
             for j in neighbours_4(i, w, h) {
-                let (zj, state) = (depth[j], self.state[j]);
+                let (zj, state_j) = (depth[j], state[j]);
                 if mask.get(j).is_some_and(|&v| v != 0)
-                    || (state != candidate && state != FREE)
+                    || (state_j != candidate && state_j != FREE)
                     || !has_depth(zj)
                     || (zj - z).abs() >= step * z
                 {
@@ -330,12 +330,30 @@ impl BodyCompletion {
                 if (zj - median).abs() >= band {
                     leaked = true;
                     if stop_at_leak {
-                        return true;
+                        break;
                     }
-                } else if state == candidate {
-                    self.state[j] = TAKEN;
-                    self.queue.push(j as u32);
+                } else if state_j == candidate {
+                    state[j] = TAKEN;
+                    queue.push(j as u32);
                 }
+            }
+            leaked
+        };
+        let mut leaked = false;
+        let seeds = queue.len();
+        for &i in boundary.iter() {
+            leaked |= visit(i as usize, queue);
+            if leaked && stop_at_leak {
+                return true;
+            }
+        }
+        let mut head = seeds;
+        while head < queue.len() {
+            let i = queue[head] as usize;
+            head += 1;
+            leaked |= visit(i, queue);
+            if leaked && stop_at_leak {
+                return true;
             }
         }
         leaked
