@@ -699,7 +699,9 @@ impl OfflineProcessor {
         });
         refined?;
         backward_done?;
-        refinement.ready.extend(buffer.drain(..));
+        let later = &mut self.later;
+        later.release_to_refinement(later.buffer.len());
+        let refinement = &mut later.refinement;
         refinement.refine_ready(refinement.ready.len(), emit)?;
         if let Some(hysteresis) = &mut refinement.hysteresis {
             hysteresis.flush(emit)?;
@@ -798,9 +800,14 @@ impl LaterPasses {
     /// Pass 2 over every buffered frame; the first `n` then wait for refinement.
     fn backward_pass(&mut self, n: usize) -> Result<()> {
         self.backward.run(&mut self.buffer, n)?;
+        self.release_to_refinement(n);
+        Ok(())
+    }
+
+    /// The first `n` buffered frames, past the backward pass, go to wait for refinement.
+    fn release_to_refinement(&mut self, n: usize) {
         let n = n.min(self.buffer.len());
         self.refinement.ready.extend(self.buffer.drain(..n));
-        Ok(())
     }
 }
 
