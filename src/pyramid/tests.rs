@@ -116,6 +116,31 @@ fn edge_aware_depth_agrees_with_its_scalar_reference() {
     }
 }
 
+/// The depth derivative by its definition, branching: the central difference when both
+/// neighbours lie on the centre's surface, the one-sided difference when one does, NaN when
+/// neither does; bit for bit over invalid, near, edge and far neighbours.
+#[test]
+fn depth_derivative_is_central_one_sided_or_nan() {
+    let centre = 1.0_f32;
+    let on_surface = |z: f32| z > 0.0 && (z - centre).abs() <= DEPTH_EDGE_RELATIVE * centre;
+    let neighbours = [0.0, 0.9, 0.95, 0.96, 0.999, 1.0, 1.001, 1.04, 1.05, 1.06, 2.0];
+    for prev in neighbours {
+        for next in neighbours {
+            let expected = match (on_surface(prev), on_surface(next)) {
+                (true, true) => ((next - centre) + (centre - prev)) * 0.5,
+                (true, false) => centre - prev,
+                (false, true) => next - centre,
+                (false, false) => f32::NAN,
+            };
+            assert_eq!(
+                depth_derivative(prev, centre, next).to_bits(),
+                expected.to_bits(),
+                "prev {prev}, next {next}"
+            );
+        }
+    }
+}
+
 /// The packed samples against the pixel-by-pixel reference, bit for bit (NaNs included),
 /// on thin and odd sizes and on depth with holes, edges, NaN and infinity.
 #[test]
