@@ -321,25 +321,27 @@ impl DvoEstimator {
                     &[][..]
                 };
                 let ray_y = (y as f32 - cy) * fy_inv;
+                // Branch-free compaction: every pixel's point is written at the next free
+                // slot, which only a kept point advances (whether a pixel is kept is as good
+                // as random on textured depth, so branches mispredicted).
+                let start = pts.len();
+                pts.resize(start + w, ReferencePoint::default());
+                let row_points = &mut pts[start..];
+                let mut kept = 0usize;
                 for (x, ((&z, &g), sample)) in depth_row.iter().zip(gray_row).zip(sample_row).enumerate() {
-                    if !(z > 0.0 && z >= cfg.min_depth_m && z <= cfg.max_depth_m) {
-                        continue;
-                    }
-                    if min_grad_sq > 0.0 {
-                        let (gx, gy) = (sample.0[TargetSample::GRAD_X], sample.0[TargetSample::GRAD_Y]);
-                        if gx * gx + gy * gy < min_grad_sq {
-                            continue;
-                        }
-                    }
-                    if have_mask && ignore_row[x] != 0 {
-                        ignored += 1;
-                        continue;
-                    }
-                    pts.push(ReferencePoint {
+                    let (gx, gy) = (sample.0[TargetSample::GRAD_X], sample.0[TargetSample::GRAD_Y]);
+                    // (A NaN gradient passes, and any gradient passes a threshold of 0.)
+                    let usable = (z > 0.0 && z >= cfg.min_depth_m && z <= cfg.max_depth_m)
+                        & !(gx * gx + gy * gy < min_grad_sq);
+                    let masked = have_mask && ignore_row[x] != 0;
+                    row_points[kept] = ReferencePoint {
                         point_m: [(x as f32 - cx) * fx_inv * z, ray_y * z, z],
                         intensity: g,
-                    });
+                    };
+                    kept += usize::from(usable & !masked);
+                    ignored += usize::from(usable & masked);
                 }
+                pts.truncate(start + kept);
             }
             if l == finest {
                 self.ignored_fraction = ignored as f64 / (ignored + pts.len()).max(1) as f64;

@@ -159,3 +159,96 @@ fn validation_names_the_bad_field() {
         }
     }
 }
+
+/// The reference points of every level against their per-pixel definition, in row order:
+/// depth within the configured range, gradient not below the threshold (a NaN gradient
+/// passes), not ignored; and the ignored fraction at the finest level counts the ignored
+/// pixels that would otherwise be kept.
+#[test]
+fn reference_points_are_the_usable_unignored_pixels_in_row_order() {
+    use crate::geometry::camera::presets;
+    let size = ImageSize::new(96, 72);
+    let config = DvoConfig {
+        levels: 3,
+        finest_level: 0,
+        min_gradient_per_px: 0.02,
+        min_depth_m: 0.5,
+        max_depth_m: 3.0,
+        ..DvoConfig::paper()
+    };
+    let mut rng = crate::xorshift::XorShift64::new(0x9e37_79b9_7f4a_7c15);
+    let mut next = move |n: u64| rng.next_u64() % n;
+    let gray = GrayF32::from_fn(size, |x, y| match next(40) {
+        0 if x > 0 && y > 0 => f32::NAN,
+        k => ((x * 5 + y * 3) % 13) as f32 / 13.0 * 0.3 + k as f32 * 0.001,
+    });
+    let depth = DepthMeters::from_fn(size, |_, _| match next(10) {
+        0 => 0.0,
+        1 => 0.2,
+        2 => 4.0,
+        k => 1.0 + 0.1 * k as f32,
+    });
+    let mask = Mask::from_fn(size, |x, y| if (x / 8 + y / 8) % 3 == 0 { 255 } else { 0 });
+    let mut pyr = ImagePyramid::new(size, presets::TUM_FR2, 3, 0).unwrap();
+    pyr.build(&gray, &depth).unwrap();
+    let mut est = DvoEstimator::new(size, config).unwrap();
+    est.prepare_reference(&pyr, Some(&mask)).unwrap();
+    let min_grad_sq = config.min_gradient_per_px * config.min_gradient_per_px;
+    for l in 0..config.levels {
+        let level = pyr.level(l).unwrap();
+        let k = level.intrinsics;
+        let w = level.size().width;
+        let ignore = &est.ignore[l];
+        let (mut expected, mut ignored) = (Vec::new(), 0usize);
+        for (i, s) in level.samples.iter().enumerate() {
+            let z = level.depth_m.as_slice()[i];
+            let (gx, gy) = (s.0[TargetSample::GRAD_X], s.0[TargetSample::GRAD_Y]);
+            let grad_sq = gx * gx + gy * gy;
+            let usable =
+                z > 0.0 && z >= config.min_depth_m && z <= config.max_depth_m && !(grad_sq < min_grad_sq);
+            if !usable {
+                continue;
+            }
+            if ignore[i] != 0 {
+                ignored += 1;
+                continue;
+            }
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            expected.push(ReferencePoint {
+                point_m: [
+                    (x - k.cx as f32) * (1.0 / k.fx as f32) * z,
+                    (y - k.cy as f32) * (1.0 / k.fy as f32) * z,
+                    z,
+                ],
+                intensity: level.gray.as_slice()[i],
+            });
+        }
+        let bits = |p: &[ReferencePoint]| -> Vec<[u32; 4]> {
+            p.iter()
+                .map(|p| [p.point_m[0], p.point_m[1], p.point_m[2], p.intensity].map(f32::to_bits))
+                .collect()
+        };
+        assert_eq!(bits(est.reference_points(l)), bits(&expected), "level {l}");
+        assert!(!expected.is_empty(), "level {l}: no point kept");
+        if l == 0 {
+            assert!(
+                expected.len() > 100 && ignored > 100,
+                "{} kept, {ignored} ignored",
+                expected.len()
+            );
+            assert_eq!(
+                est.ignored_fraction,
+                ignored as f64 / (ignored + expected.len()) as f64
+            );
+            let nan_kept = est
+                .reference_points(0)
+                .iter()
+                .filter(|p| p.intensity.is_nan())
+                .count();
+            assert!(
+                nan_kept > 0,
+                "no NaN-gradient pixel kept: the case is not exercised"
+            );
+        }
+    }
+}
