@@ -330,9 +330,10 @@ impl DvoEstimator {
                 let mut kept = 0usize;
                 for (x, ((&z, &g), sample)) in depth_row.iter().zip(gray_row).zip(sample_row).enumerate() {
                     let (gx, gy) = (sample.0[TargetSample::GRAD_X], sample.0[TargetSample::GRAD_Y]);
-                    // (A NaN gradient passes, and any gradient passes a threshold of 0.)
+                    let grad_sq = gx * gx + gy * gy;
+                    // A NaN gradient passes (any gradient passes a threshold of 0).
                     let usable = (z > 0.0 && z >= cfg.min_depth_m && z <= cfg.max_depth_m)
-                        & !(gx * gx + gy * gy < min_grad_sq);
+                        & ((grad_sq >= min_grad_sq) | grad_sq.is_nan());
                     let masked = have_mask && ignore_row[x] != 0;
                     row_points[kept] = ReferencePoint {
                         point_m: [(x as f32 - cx) * fx_inv * z, ray_y * z, z],

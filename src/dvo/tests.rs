@@ -204,8 +204,10 @@ fn reference_points_are_the_usable_unignored_pixels_in_row_order() {
             let z = level.depth_m.as_slice()[i];
             let (gx, gy) = (s.0[TargetSample::GRAD_X], s.0[TargetSample::GRAD_Y]);
             let grad_sq = gx * gx + gy * gy;
-            let usable =
-                z > 0.0 && z >= config.min_depth_m && z <= config.max_depth_m && !(grad_sq < min_grad_sq);
+            let usable = z > 0.0
+                && z >= config.min_depth_m
+                && z <= config.max_depth_m
+                && (grad_sq >= min_grad_sq || grad_sq.is_nan());
             if !usable {
                 continue;
             }
