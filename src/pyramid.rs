@@ -345,7 +345,7 @@ fn depth_derivative(prev: f32, centre: f32, next: f32) -> f32 {
     let n_ok = next > 0.0 && (next - centre).abs() <= limit;
     let (wp, wn) = (f32::from(u8::from(p_ok)), f32::from(u8::from(n_ok)));
     // 1 / the number of valid neighbours (NaN for none): selects vectorise, a table lookup
-    // in the row loop did not (the loop took 3× as long).
+    // did not (at 320×240 the row loop took 2× as long with it in SSE2, 3× in AVX2).
     let inv_count = if p_ok && n_ok {
         0.5
     } else if p_ok || n_ok {
