@@ -111,14 +111,13 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
                 }
                 interleaved => interleaved_rgb_offsets(interleaved).unwrap_or([0, 0, 0]),
             };
-            let [r, g, b] = rgb_offsets;
             for y in 0..size.height {
-                for (out, px) in gray.row_mut(y).iter_mut().zip(row(y).chunks_exact(bpp)) {
-                    *out = if bpp == 1 {
-                        f32::from(px[0]) / 255.0
-                    } else {
-                        wr * f32::from(px[r]) + wg * f32::from(px[g]) + wb * f32::from(px[b])
-                    };
+                if bpp == 1 {
+                    for (out, &v) in gray.row_mut(y).iter_mut().zip(row(y)) {
+                        *out = f32::from(v) / 255.0;
+                    }
+                } else {
+                    pixels::gray_from_interleaved(gray.row_mut(y), row(y), bpp, rgb_offsets, [wr, wg, wb]);
                 }
             }
             Ok(())
@@ -135,9 +134,7 @@ pub fn gray_from_image_into(msg: &ImageMsg, topic: &str, gray: &mut GrayF32) -> 
                 }
             } else {
                 let rgb = decoded.into_rgb8();
-                for (out, px) in gray.as_mut_slice().iter_mut().zip(rgb.as_raw().chunks_exact(3)) {
-                    *out = wr * f32::from(px[0]) + wg * f32::from(px[1]) + wb * f32::from(px[2]);
-                }
+                pixels::gray_from_interleaved(gray.as_mut_slice(), rgb.as_raw(), 3, [0, 1, 2], [wr, wg, wb]);
             }
             Ok(())
         }
