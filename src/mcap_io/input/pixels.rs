@@ -1,6 +1,6 @@
 //! Pixel codecs of the field: RVL depth compression (`compressedDepth rvl`), packed YUV 4:2:2
-//! and Bayer mosaics. Every decoder checks declared sizes against the data before writing and
-//! fails with a message instead of reading past the end.
+//! and Bayer mosaics, and the grey of interleaved colour. Every decoder checks declared sizes
+//! against the data before writing and fails with a message instead of reading past the end.
 
 use crate::mcap_io::encoding::BayerFilter;
 
