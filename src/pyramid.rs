@@ -27,6 +27,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize};
+use crate::simd::{simd_kernel, Simd};
 
 /// Two depths closer than this fraction of the nearer one are taken to lie on one surface.
 /// Kinect-class sensors have ≈1 % depth noise at 1–4 m and a 2×2 block of a slanted surface
@@ -402,6 +403,7 @@ pub fn pack_samples_into(gray: &GrayF32, depth_m: &DepthMeters, samples: &mut [T
             _ => 1.0,
         }
     };
+    let simd = Simd::detect();
     samples
         .par_chunks_mut(w * ROWS_PER_TASK)
         .enumerate()
@@ -429,37 +431,19 @@ pub fn pack_samples_into(gray: &GrayF32, depth_m: &DepthMeters, samples: &mut [T
                 }
                 out[0] = row.sample(0, inv_spacing(0, w));
                 out[w - 1] = row.sample(w - 1, inv_spacing(w - 1, w));
-                pack_inner_dispatch(&row, &mut out[1..w - 1]);
+                pack_inner(simd, &row, &mut out[1..w - 1]);
             }
         });
     Ok(())
 }
 
-/// [`pack_inner`] compiled for AVX2 when the CPU has it.
-fn pack_inner_dispatch(row: &SampleRow<'_>, inner: &mut [TargetSample]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { pack_inner_avx2(row, inner) };
-        }
-    }
-    pack_inner(row, inner);
-}
-
-/// [`pack_inner`] in 256-bit registers (the same code; no FMA, so the same results bit for
-/// bit).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn pack_inner_avx2(row: &SampleRow<'_>, inner: &mut [TargetSample]) {
-    pack_inner(row, inner);
-}
+simd_kernel!(pack_inner, pack_inner_avx2, pack_inner_generic, (row: &SampleRow<'_>, inner: &mut [TargetSample]));
 
 /// The samples of a row of at least 3 pixels but its first and last, `inner[i]` for pixel
 /// `i + 1`: both horizontal neighbours exist, and the vertical ones are 0 for every pixel of a
 /// border row. The same arithmetic as [`SampleRow::sample`].
 #[inline(always)]
-fn pack_inner(row: &SampleRow<'_>, inner: &mut [TargetSample]) {
+fn pack_inner_generic(row: &SampleRow<'_>, inner: &mut [TargetSample]) {
     let n = inner.len();
     let (g, g_up, g_down) = (&row.g[..n + 2], &row.g_up[1..n + 1], &row.g_down[1..n + 1]);
     let (d, d_up, d_down) = (&row.d[..n + 2], &row.d_up[1..n + 1], &row.d_down[1..n + 1]);

@@ -36,10 +36,11 @@ use nalgebra::{Isometry3, Matrix6, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::transport::{simd_kernel, PixelBounds, PixelRays, Simd, ROWS_PER_TASK};
+use super::transport::{PixelBounds, PixelRays, ROWS_PER_TASK};
 use crate::error::{Error, Result};
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, Mask};
+use crate::simd::{simd_kernel, Simd};
 
 /// Parameters of the slow-change evidence ([`super::OcclusionConfig::slow_evidence`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -3,6 +3,7 @@
 //! against the data before writing and fails with a message instead of reading past the end.
 
 use crate::mcap_io::encoding::BayerFilter;
+use crate::simd::{simd_kernel, Simd};
 
 /// Bytes of the header `compressed_depth_image_transport` writes before an RVL stream: the
 /// image's width and height as little-endian `u32`.
@@ -256,11 +257,12 @@ pub fn gray_from_interleaved(
     offsets: [usize; 3],
     weights: [f32; 3],
 ) {
+    let simd = Simd::detect();
     match (bpp, offsets) {
-        (3, [0, 1, 2]) => weighted_dispatch::<3, 0, 1, 2>(out, data, weights),
-        (4, [0, 1, 2]) => weighted_dispatch::<4, 0, 1, 2>(out, data, weights),
-        (3, [2, 1, 0]) => weighted_dispatch::<3, 2, 1, 0>(out, data, weights),
-        (4, [2, 1, 0]) => weighted_dispatch::<4, 2, 1, 0>(out, data, weights),
+        (3, [0, 1, 2]) => weighted::<3, 0, 1, 2>(simd, out, data, weights),
+        (4, [0, 1, 2]) => weighted::<4, 0, 1, 2>(simd, out, data, weights),
+        (3, [2, 1, 0]) => weighted::<3, 2, 1, 0>(simd, out, data, weights),
+        (4, [2, 1, 0]) => weighted::<4, 2, 1, 0>(simd, out, data, weights),
         _ => gray_from_interleaved_reference(out, data, bpp, offsets, weights),
     }
 }
@@ -278,35 +280,16 @@ pub fn gray_from_interleaved_reference(
     }
 }
 
-fn weighted_dispatch<const BPP: usize, const R: usize, const G: usize, const B: usize>(
-    out: &mut [f32],
-    data: &[u8],
-    weights: [f32; 3],
-) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { weighted_avx2::<BPP, R, G, B>(out, data, weights) };
-        }
-    }
-    weighted::<BPP, R, G, B>(out, data, weights);
-}
-
-/// [`weighted`] in 256-bit registers (no FMA: the same bits).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn weighted_avx2<const BPP: usize, const R: usize, const G: usize, const B: usize>(
-    out: &mut [f32],
-    data: &[u8],
-    weights: [f32; 3],
-) {
-    weighted::<BPP, R, G, B>(out, data, weights);
-}
+simd_kernel!(
+    weighted,
+    weighted_avx2,
+    weighted_generic<const BPP: usize, const R: usize, const G: usize, const B: usize>,
+    (out: &mut [f32], data: &[u8], weights: [f32; 3])
+);
 
 /// The reference's arithmetic with the layout known at compile time.
 #[inline(always)]
-fn weighted<const BPP: usize, const R: usize, const G: usize, const B: usize>(
+fn weighted_generic<const BPP: usize, const R: usize, const G: usize, const B: usize>(
     out: &mut [f32],
     data: &[u8],
     [wr, wg, wb]: [f32; 3],

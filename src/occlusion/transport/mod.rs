@@ -33,59 +33,8 @@ const ROUND_MAGIC: f32 = 8_388_608.0;
 /// Warp source of a pixel whose warp is invalid.
 const NO_SOURCE: u32 = u32::MAX;
 
-/// Which build of the per-row kernels runs. Each kernel is one generic body compiled twice:
-/// for the x86-64 baseline (SSE2) and with AVX2 + FMA enabled, where the compiler evaluates
-/// the same loops 8 lanes wide (the gather stays scalar loads). No kernel calls `mul_add`,
-/// so both builds compute bit-identical results (tested).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Simd {
-    /// The x86-64 baseline (or any other architecture).
-    Baseline,
-    /// AVX2 + FMA (x86-64 only, chosen at run time when the CPU has them).
-    Avx2,
-}
-
-impl Simd {
-    /// The widest build this CPU runs.
-    pub fn detect() -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-                return Self::Avx2;
-            }
-        }
-        Self::Baseline
-    }
-}
-
-/// `fn $name(simd, args…)`: runs `$generic(args…)` (an `#[inline(always)]` body) from a
-/// baseline or an AVX2 + FMA function. Both are separate non-inlined functions whose slice
-/// arguments the compiler knows do not alias.
-macro_rules! simd_kernel {
-    ($name:ident, $avx2:ident, $generic:ident, ($($arg:ident: $ty:ty),*) $(-> $ret:ty)?) => {
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2,fma")]
-        #[allow(clippy::too_many_arguments)]
-        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
-            $generic($($arg),*)
-        }
-
-        #[inline(never)]
-        #[allow(clippy::too_many_arguments)]
-        fn $name(simd: Simd, $($arg: $ty),*) $(-> $ret)? {
-            #[cfg(target_arch = "x86_64")]
-            {
-                if simd == Simd::Avx2 {
-                    // SAFETY: `Simd::Avx2` is only chosen when the CPU has AVX2 and FMA.
-                    return unsafe { $avx2($($arg),*) };
-                }
-            }
-            let _ = simd;
-            $generic($($arg),*)
-        }
-    };
-}
-pub(super) use simd_kernel;
+pub(super) use crate::simd::simd_kernel;
+pub use crate::simd::Simd;
 
 /// Inclusive bounding box of a pixel set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
