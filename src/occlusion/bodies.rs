@@ -12,9 +12,11 @@
 //! desk) would take that surface in; so a component whose growth reaches a continuous pixel
 //! farther than `max_depth_band_m` from its median depth keeps none of it, unless the surface
 //! it is continuous with is a plane that can be taken out of the growth
-//! (`support_plane_tolerance_inv_m`, D27): the growth is then grown again without it. What is
-//! kept is a body bounded by depth edges, or by its support plane, on every side that is not
-//! the image border.
+//! (`support_plane_tolerance_inv_m`, D27): the growth is then grown again without it. A plane
+//! the component itself lies on is one of its own faces, passed over in that search
+//! (`max_own_planes`); a body completed over one is kept only when it stands in front of what
+//! surrounds it. What is kept is a body bounded by depth edges, or by its support plane, on
+//! every side that is not the image border.
 //!
 //! Small components are left as they are: the false positives of a static scene are components
 //! near the minimum object size, and grown over the wall or cabinet they lie on they would
@@ -44,9 +46,15 @@ pub struct BodyCompletionConfig {
     /// tolerance in inverse depth (1/m; a plane is linear in inverse depth across the image),
     /// up to [`SUPPORT_MAX_PLANES`] of them until what the component reaches without them no
     /// longer leaks; that joins the mask. A plane the component lies on (more than
-    /// [`SUPPORT_MAX_SEED_FRACTION`] of it) is never taken out: the growth is then dropped.
+    /// [`SUPPORT_MAX_SEED_FRACTION`] of it) is never taken out (see `max_own_planes`).
     /// `None`: every leaking growth is dropped (docs/method.md D26 alone).
     pub support_plane_tolerance_inv_m: Option<f32>,
+    /// Planes the component lies on (its own faces: a block's front and side) that the search
+    /// for the support plane passes over, at most: their pixels stay in the growth, and the
+    /// next plane is fitted to the rest of it. A body completed over such a face is kept only
+    /// when it stands in front of its surroundings ([`OWN_FACE_MIN_FARTHER_FRACTION`]). 0: the
+    /// growth is dropped at the first such plane (D27 as first built).
+    pub max_own_planes: usize,
 }
 
 /// Default [`BodyCompletionConfig::max_depth_step_fraction`]: the step DVO's ignore-mask
@@ -78,6 +86,12 @@ pub const SUPPORT_MAX_SEED_FRACTION: f32 = 0.3;
 pub const SUPPORT_MIN_GROWN_FRACTION: f32 = 0.2;
 /// Planes taken out of a leaking growth at most (a floor, the wall behind, a desk's front).
 pub const SUPPORT_MAX_PLANES: usize = 3;
+/// Default [`BodyCompletionConfig::max_own_planes`]: the two faces of a box seen from the side.
+pub const DEFAULT_MAX_OWN_PLANES: usize = 2;
+/// A body completed over a face of its own must stand in front of its surroundings: more than
+/// this fraction of the depth steps at its outline lead to a farther surface (a false mark on a
+/// wall, completed to the wall, has the desk and the people in front of it).
+pub const OWN_FACE_MIN_FARTHER_FRACTION: f32 = 0.5;
 /// Plane hypotheses tried per plane taken out.
 const SUPPORT_HYPOTHESES: usize = 64;
 /// Pixels of the growth (and of the component) the hypotheses are scored on, at most.
@@ -90,6 +104,7 @@ impl Default for BodyCompletionConfig {
             max_depth_band_m: DEFAULT_MAX_DEPTH_BAND_M,
             min_seed_pixels_vga: DEFAULT_MIN_SEED_PIXELS_VGA,
             support_plane_tolerance_inv_m: Some(DEFAULT_SUPPORT_PLANE_TOLERANCE_INV_M),
+            max_own_planes: DEFAULT_MAX_OWN_PLANES,
         }
     }
 }
@@ -165,6 +180,8 @@ pub struct BodyCompletion {
     /// of its leaking growth, for the support planes (at most [`SUPPORT_SAMPLE`] each).
     seed_sample: Vec<[f32; 3]>,
     grown_sample: Vec<[f32; 3]>,
+    /// The component's own faces passed over while its support planes are sought.
+    own_planes: Vec<[f32; 3]>,
 }
 
 /// Valid depth: positive and finite (0 and NaN mark missing measurements).
@@ -192,6 +209,7 @@ impl BodyCompletion {
             leaked_growth: Vec::new(),
             seed_sample: Vec::with_capacity(SUPPORT_SAMPLE),
             grown_sample: Vec::with_capacity(SUPPORT_SAMPLE),
+            own_planes: Vec::with_capacity(config.max_own_planes),
         })
     }
 
@@ -271,7 +289,7 @@ impl BodyCompletion {
                     .config
                     .support_plane_tolerance_inv_m
                     .is_some_and(|tolerance| {
-                        self.keep_off_support_plane(seeds, depth, median, tolerance, start)
+                        self.keep_off_support_plane(seeds, m, depth, median, tolerance, start)
                     });
             let grown = &self.queue[seeds..];
             if !keep {
@@ -361,16 +379,19 @@ impl BodyCompletion {
 
     /// For a growth that leaked (`self.queue[seeds..]`, the pixels within the band): takes out
     /// its support surface. Up to [`SUPPORT_MAX_PLANES`] times, the plane in (column, row, 1/Z)
-    /// that holds the most of the remaining growth is taken out of it, unless the component
-    /// lies on it (more than [`SUPPORT_MAX_SEED_FRACTION`] of it: the component is part of that
-    /// surface) or it holds less than [`SUPPORT_MIN_GROWN_FRACTION`] of the growth; then the
-    /// growth is grown again from the component without the planes taken out. Once that growth
+    /// that holds the most of the remaining growth is taken out of it, unless it holds less
+    /// than [`SUPPORT_MIN_GROWN_FRACTION`] of the growth (the search ends) or the component
+    /// lies on it (more than [`SUPPORT_MAX_SEED_FRACTION`] of it: one of the body's own faces,
+    /// which stays in the growth and is left out of the next fits; after
+    /// `max_own_planes` of them the search ends); then the growth is grown again from the
+    /// component without the planes taken out. Once that growth
     /// no longer reaches beyond the band, `self.queue` is cut to the component and it, and true
     /// is returned. Otherwise the whole growth is freed, `self.queue` cut to the component, and
     /// false returned.
     fn keep_off_support_plane(
         &mut self,
         seeds: usize,
+        mask: &[u8],
         depth: &[f32],
         median: f32,
         tolerance: f32,
@@ -408,17 +429,20 @@ impl BodyCompletion {
         let mut rng = XorShift64::new((rng_seed as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
         let mut next = |n: usize| rng.below(n);
         let mut kept = false;
-        for _ in 0..SUPPORT_MAX_PLANES {
-            let remaining = self
-                .leaked_growth
-                .iter()
-                .filter(|&&i| self.state[i as usize] == OFF_PLANE)
-                .count();
+        // The component's own faces found so far: passed over, and left out of later fits.
+        let mut own_planes = std::mem::take(&mut self.own_planes);
+        own_planes.clear();
+        let mut taken_out = 0;
+        while taken_out < SUPPORT_MAX_PLANES {
+            let candidate = |i: u32| {
+                self.state[i as usize] == OFF_PLANE && !own_planes.iter().any(|plane| on(plane, &point(i)))
+            };
+            let remaining = self.leaked_growth.iter().filter(|&&i| candidate(i)).count();
             grown_sample.clear();
             grown_sample.extend(
                 self.leaked_growth
                     .iter()
-                    .filter(|&&i| self.state[i as usize] == OFF_PLANE)
+                    .filter(|&&i| candidate(i))
                     .step_by(stride(remaining))
                     .map(|&i| point(i)),
             );
@@ -444,12 +468,18 @@ impl BodyCompletion {
             let Some((plane, count)) = best else {
                 break;
             };
-            let on_seed = seed_sample.iter().filter(|p| on(&plane, p)).count();
-            if (count as f32) < SUPPORT_MIN_GROWN_FRACTION * grown_sample.len() as f32
-                || on_seed as f32 > SUPPORT_MAX_SEED_FRACTION * seed_sample.len() as f32
-            {
+            if (count as f32) < SUPPORT_MIN_GROWN_FRACTION * grown_sample.len() as f32 {
                 break;
             }
+            let on_seed = seed_sample.iter().filter(|p| on(&plane, p)).count();
+            if on_seed as f32 > SUPPORT_MAX_SEED_FRACTION * seed_sample.len() as f32 {
+                if own_planes.len() == self.config.max_own_planes {
+                    break;
+                }
+                own_planes.push(plane);
+                continue;
+            }
+            taken_out += 1;
             for &i in &self.leaked_growth {
                 if self.state[i as usize] == OFF_PLANE && on(&plane, &point(i)) {
                     self.state[i as usize] = FREE;
@@ -466,6 +496,12 @@ impl BodyCompletion {
             }
             self.queue.truncate(seeds);
         }
+        // A face passed over may be a static surface (a false mark on a wall, completed to the
+        // wall once the desk in front of it is taken out): a body stands in front of what
+        // surrounds it.
+        if kept && !own_planes.is_empty() {
+            kept = self.stands_in_front(mask, depth);
+        }
         for &i in &self.leaked_growth {
             if self.state[i as usize] == OFF_PLANE || (!kept && self.state[i as usize] == TAKEN) {
                 self.state[i as usize] = FREE;
@@ -474,8 +510,36 @@ impl BodyCompletion {
         if !kept {
             self.queue.truncate(seeds);
         }
-        (self.seed_sample, self.grown_sample) = (seed_sample, grown_sample);
+        (self.seed_sample, self.grown_sample, self.own_planes) = (seed_sample, grown_sample, own_planes);
         kept
+    }
+
+    /// Whether the body in `self.queue` (the component and its growth, all taken) stands in
+    /// front of what surrounds it: of the depth steps from its pixels to 4-neighbours outside
+    /// it and outside `mask` (continuous neighbours, as in [`Self::grow`], are no step), more
+    /// than [`OWN_FACE_MIN_FARTHER_FRACTION`] lead to a farther surface.
+    fn stands_in_front(&self, mask: &[u8], depth: &[f32]) -> bool {
+        let (w, h) = (self.size.width, self.size.height);
+        let step = self.config.max_depth_step_fraction;
+        let (mut farther, mut nearer) = (0usize, 0usize);
+        for &i in &self.queue {
+            let (i, z) = (i as usize, depth[i as usize]);
+            if !has_depth(z) {
+                continue;
+            }
+            for j in neighbours_4(i, w, h) {
+                let zj = depth[j];
+                if self.state[j] == TAKEN || mask[j] != 0 || !has_depth(zj) || (zj - z).abs() < step * z {
+                    continue;
+                }
+                if zj > z {
+                    farther += 1;
+                } else {
+                    nearer += 1;
+                }
+            }
+        }
+        farther as f32 > OWN_FACE_MIN_FARTHER_FRACTION * (farther + nearer) as f32
     }
 }
 
@@ -507,24 +571,19 @@ mod tests {
     /// continuous with the wall; a board (x 10..30, y 5..25) floating at 1.5 m; a box (x 40..56,
     /// y 20..41) standing on the floor, at the floor's depth where it stands.
     fn scene() -> DepthMeters {
-        let size = ImageSize::new(64, 48);
-        let mut depth = DepthMeters::filled(size, 3.0);
-        for y in 30..48 {
-            for x in 0..64 {
-                depth.set(x, y, floor_m(y));
-            }
-        }
-        for y in 5..25 {
-            for x in 10..30 {
-                depth.set(x, y, 1.5);
-            }
-        }
+        let mut depth = wall_and_floor();
+        set_depth(&mut depth, 10..30, 5..25, 1.5);
         // The box's front is at the floor's depth where it stands (row 40): continuous with
         // the floor's row 41 below it.
-        for y in 20..41 {
-            for x in 40..56 {
-                depth.set(x, y, floor_m(40));
-            }
+        set_depth(&mut depth, 40..56, 20..41, floor_m(40));
+        depth
+    }
+
+    /// The wall and the floor of [`scene`] alone.
+    fn wall_and_floor() -> DepthMeters {
+        let mut depth = DepthMeters::filled(ImageSize::new(64, 48), 3.0);
+        for y in 30..48 {
+            set_depth(&mut depth, 0..64, y..y + 1, floor_m(y));
         }
         depth
     }
@@ -544,6 +603,14 @@ mod tests {
             },
         )
         .unwrap()
+    }
+
+    fn set_depth(depth: &mut DepthMeters, xs: std::ops::Range<usize>, ys: std::ops::Range<usize>, z: f32) {
+        for y in ys {
+            for x in xs.clone() {
+                depth.set(x, y, z);
+            }
+        }
     }
 
     fn mark(mask: &mut Mask, xs: std::ops::Range<usize>, ys: std::ops::Range<usize>) {
@@ -615,6 +682,59 @@ mod tests {
                 assert_eq!(mask.get(x, y) != 0, marked || box_off_floor, "({x}, {y})");
             }
         }
+    }
+
+    /// A block standing on the floor whose front outweighs the floor in the growth (a strip of
+    /// it marked): the front is the block's own face, passed over, and the floor below is taken
+    /// out. Without passing over own faces the growth is dropped.
+    #[test]
+    fn a_block_whose_own_face_outweighs_the_floor_grows_to_the_face_without_the_floor() {
+        let mut depth = wall_and_floor();
+        set_depth(&mut depth, 16..60, 8..41, floor_m(40));
+        let mut marked = Mask::filled(depth.size(), 0);
+        mark(&mut marked, 54..60, 8..41);
+        let config = |max_own_planes| BodyCompletionConfig {
+            min_seed_pixels_vga: 50 * VGA_PER_PIXEL,
+            max_own_planes,
+            ..BodyCompletionConfig::default()
+        };
+
+        let mut mask = marked.clone();
+        let mut completion = BodyCompletion::new(depth.size(), config(0)).unwrap();
+        let stats = completion.complete(&mut mask, &depth).unwrap();
+        assert_eq!((stats.completed, stats.dropped, stats.supported), (0, 1, 0));
+        assert_eq!(mask, marked);
+
+        let mut completion = BodyCompletion::new(depth.size(), config(DEFAULT_MAX_OWN_PLANES)).unwrap();
+        let stats = completion.complete(&mut mask, &depth).unwrap();
+        assert_eq!((stats.completed, stats.dropped, stats.supported), (1, 0, 1));
+        // As in the box test above, the front's rows 39 and 40 lie on the floor's plane.
+        for y in 0..48 {
+            for x in 0..64 {
+                let face_off_floor = (16..60).contains(&x) && (8..39).contains(&y);
+                let expected = marked.get(x, y) != 0 || face_off_floor;
+                assert_eq!(mask.get(x, y) != 0, expected, "({x}, {y})");
+            }
+        }
+    }
+
+    /// A false mark on a wall that meets the floor, a board in front of the wall: the wall is
+    /// the mark's own face and the floor its support, but the wall does not stand in front of
+    /// what surrounds it (the board is nearer), so the growth is dropped.
+    #[test]
+    fn a_mark_on_a_wall_behind_a_nearer_object_is_not_grown_over_the_wall() {
+        let mut depth = wall_and_floor();
+        // The wall continuous with the floor's farthest row.
+        set_depth(&mut depth, 0..64, 0..30, floor_m(30));
+        set_depth(&mut depth, 10..30, 5..25, 1.5);
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, 34..40, 2..28);
+        let before = mask.clone();
+        let stats = completion(50 * VGA_PER_PIXEL, SUPPORT)
+            .complete(&mut mask, &depth)
+            .unwrap();
+        assert_eq!((stats.completed, stats.dropped, stats.supported), (0, 1, 0));
+        assert_eq!(mask, before);
     }
 
     #[test]
