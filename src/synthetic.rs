@@ -235,6 +235,11 @@ pub enum Scenario {
     /// stands on is in view below it, as under a person walking past
     /// ([`FailureClass::DominantFromStart`]).
     HeldOutDominantOnFloor,
+    /// Held out: a 0.9 m × 1.75 m block standing on the floor 1.05 m away covers more than half
+    /// of the first frame and moves off diagonally while turning (0.35 m/s sideways, 0.1 m/s
+    /// away, 6 °/s); the camera pans after it, looking down 15°
+    /// ([`FailureClass::DominantFromStart`]).
+    HeldOutCloseOnFloor,
 }
 
 /// The failure classes the later scenarios exercise (objects the occlusion detector finds
@@ -296,7 +301,7 @@ impl Scenario {
 
     /// Held-out scenarios: the same failure classes with other seeds, sizes, speeds, depths and
     /// camera paths. No default is tuned on them; report them apart.
-    pub const HELD_OUT: [Scenario; 7] = [
+    pub const HELD_OUT: [Scenario; 8] = [
         Scenario::HeldOutInViewAtStart,
         Scenario::HeldOutRestsThenMoves,
         Scenario::HeldOutHeadOnApproach,
@@ -304,11 +309,12 @@ impl Scenario {
         Scenario::HeldOutDominantFromStart,
         Scenario::HeldOutStatic,
         Scenario::HeldOutDominantOnFloor,
+        Scenario::HeldOutCloseOnFloor,
     ];
 
     /// Every scenario: [`Scenario::ALL`], then [`Scenario::FAILURE_CLASSES`], then
     /// [`Scenario::HELD_OUT`].
-    pub const EVERY: [Scenario; 21] = [
+    pub const EVERY: [Scenario; 22] = [
         Scenario::SmallObjectCrossing,
         Scenario::DominantObject,
         Scenario::EnteringWhilePanning,
@@ -330,6 +336,7 @@ impl Scenario {
         Scenario::HeldOutDominantFromStart,
         Scenario::HeldOutStatic,
         Scenario::HeldOutDominantOnFloor,
+        Scenario::HeldOutCloseOnFloor,
     ];
 
     /// The scenario called `name` ([`Self::name`]).
@@ -362,7 +369,8 @@ impl Scenario {
             Scenario::SlidingOnDesk | Scenario::HeldOutSlidingOnFloor => Some(FailureClass::NearBackground),
             Scenario::DominantFromStart
             | Scenario::HeldOutDominantFromStart
-            | Scenario::HeldOutDominantOnFloor => Some(FailureClass::DominantFromStart),
+            | Scenario::HeldOutDominantOnFloor
+            | Scenario::HeldOutCloseOnFloor => Some(FailureClass::DominantFromStart),
             Scenario::StaticDesk | Scenario::HeldOutStatic => Some(FailureClass::StaticControl),
         }
     }
@@ -399,6 +407,7 @@ impl Scenario {
             Scenario::HeldOutDominantFromStart => "held_out_dominant_from_start",
             Scenario::HeldOutStatic => "held_out_static",
             Scenario::HeldOutDominantOnFloor => "held_out_dominant_on_floor",
+            Scenario::HeldOutCloseOnFloor => "held_out_close_on_floor",
         }
     }
 }

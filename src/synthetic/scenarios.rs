@@ -396,6 +396,28 @@ impl SyntheticSequence {
                 };
                 (camera, vec![b], 90)
             }
+            Scenario::HeldOutCloseOnFloor => {
+                // Standing on the floor (y = 1.4): centre 0.875 m above it, front face at 1.05 m.
+                let b = box_moving_since(
+                    Vector3::new(-0.1, 0.525, 1.25),
+                    Vector3::new(0.45, 0.875, 0.2),
+                    MOVING_SINCE_S,
+                    Vector3::new(0.35, 0.0, 0.1),
+                    0.1,
+                    seed ^ 0x99,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::new(0.0, 0.1, 0.0),
+                    velocity_mps: Vector3::new(0.03, 0.0, 0.02),
+                    sway_amplitude_m: Vector3::new(0.03, 0.02, 0.03),
+                    sway_period_s: 1.9,
+                    yaw_rate_radps: 0.05,
+                    yaw_amplitude_rad: 0.03,
+                    pitch_amplitude_rad: 0.02,
+                    pitch_offset_rad: -0.26,
+                };
+                (camera, vec![b], 90)
+            }
         };
         Self {
             scenario: Some(scenario),

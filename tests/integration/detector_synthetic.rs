@@ -405,12 +405,13 @@ fn failure_class_static_desk() {
 /// 0.975 / 0 (ATE 0.038 m; 0.235 / never before the body completion of docs/method.md D26,
 /// whose gates were chosen with this board in view, so it is no longer held out for D26);
 /// static 0 % false positives; a block standing on the floor, the floor in view, that fills
-/// more than half the view from the first frame (added after D26, run once as defined): F1
-/// 0.734 (P 1.000, R 0.613), onset 2, ATE 0.034 m. The odometry holds; where the floor the block
-/// stands on is in view, its growth meets the floor and the completion leaves the block as the
-/// passes marked it, the leading half (without the completion: F1 0.596, onset 63; unchanged
-/// by D27: the block's own face is its growth's largest plane). Bounds: the targets where
-/// they are met (dominant: ATE 0.10 m); the block on the floor 0.04 below the F1.
+/// more than half the view from the first frame (added after D26, run once as defined: F1
+/// 0.734, onset 2, its leading half; its own face was the largest plane of its growth, so the
+/// completion dropped it): 0.889 (P 1.000, R 0.823), onset 0, ATE 0.034 m now that D27 passes
+/// over a body's own faces, a rule built on it (so it is held out no longer for that rule); a
+/// nearer, narrower block on the floor that turns as it moves off (added after that rule, run
+/// once as defined): 0.990, onset 0, ATE 0.022 m. Bounds: the targets (dominant boards and
+/// blocks: ATE 0.10 m).
 #[test]
 fn held_out_scenarios() {
     for scenario in Scenario::HELD_OUT {
@@ -423,12 +424,10 @@ fn held_out_scenarios() {
             | Scenario::HeldOutSlidingOnFloor => {
                 assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES)
             }
-            Scenario::HeldOutDominantFromStart => {
+            Scenario::HeldOutDominantFromStart
+            | Scenario::HeldOutDominantOnFloor
+            | Scenario::HeldOutCloseOnFloor => {
                 assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
-                assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
-            }
-            Scenario::HeldOutDominantOnFloor => {
-                assert_class(&score, name, 0.69, ONSET_TARGET_FRAMES);
                 assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
             }
             Scenario::HeldOutStatic => {
