@@ -410,7 +410,7 @@ fn failure_class_static_desk() {
 /// completion dropped it): 0.889 (P 1.000, R 0.823), onset 0, ATE 0.034 m now that D27 passes
 /// over a body's own faces, a rule built on it (so it is held out no longer for that rule); a
 /// nearer, narrower block on the floor that turns as it moves off (added after that rule, run
-/// once as defined): 0.990, onset 0, ATE 0.022 m. Bounds: the targets (dominant boards and
+/// once as defined): 0.990, onset 0, ATE 0.022 m, the same without the rule. Bounds: the targets (dominant boards and
 /// blocks: ATE 0.10 m).
 #[test]
 fn held_out_scenarios() {
