@@ -621,6 +621,32 @@ mod tests {
         }
     }
 
+    /// Marks the rectangle `xs × ys`, completes it over `depth` and checks that its growth was
+    /// dropped: nothing completed, supported or added, the mask as it was.
+    fn assert_growth_dropped(
+        depth: &DepthMeters,
+        xs: std::ops::Range<usize>,
+        ys: std::ops::Range<usize>,
+        support_plane_tolerance_inv_m: Option<f32>,
+    ) {
+        let mut mask = Mask::filled(depth.size(), 0);
+        mark(&mut mask, xs, ys);
+        let before = mask.clone();
+        let stats = completion(50 * VGA_PER_PIXEL, support_plane_tolerance_inv_m)
+            .complete(&mut mask, depth)
+            .unwrap();
+        assert_eq!(
+            (
+                stats.completed,
+                stats.dropped,
+                stats.supported,
+                stats.added_pixels
+            ),
+            (0, 1, 0, 0)
+        );
+        assert_eq!(mask, before);
+    }
+
     fn count(mask: &Mask) -> usize {
         mask.as_slice().iter().filter(|&&v| v != 0).count()
     }
@@ -650,15 +676,7 @@ mod tests {
 
     #[test]
     fn without_the_support_plane_a_box_continuous_with_the_floor_keeps_its_mask() {
-        let depth = scene();
-        let mut mask = Mask::filled(depth.size(), 0);
-        mark(&mut mask, 40..44, 20..41);
-        let before = mask.clone();
-        let stats = completion(50 * VGA_PER_PIXEL, None)
-            .complete(&mut mask, &depth)
-            .unwrap();
-        assert_eq!((stats.completed, stats.dropped, stats.added_pixels), (0, 1, 0));
-        assert_eq!(mask, before);
+        assert_growth_dropped(&scene(), 40..44, 20..41, None);
     }
 
     #[test]
@@ -727,27 +745,13 @@ mod tests {
         // The wall continuous with the floor's farthest row.
         set_depth(&mut depth, 0..64, 0..30, floor_m(30));
         set_depth(&mut depth, 10..30, 5..25, 1.5);
-        let mut mask = Mask::filled(depth.size(), 0);
-        mark(&mut mask, 34..40, 2..28);
-        let before = mask.clone();
-        let stats = completion(50 * VGA_PER_PIXEL, SUPPORT)
-            .complete(&mut mask, &depth)
-            .unwrap();
-        assert_eq!((stats.completed, stats.dropped, stats.supported), (0, 1, 0));
-        assert_eq!(mask, before);
+        assert_growth_dropped(&depth, 34..40, 2..28, SUPPORT);
     }
 
     #[test]
     fn a_component_lying_on_the_extended_surface_is_not_grown() {
-        let depth = scene();
-        let mut mask = Mask::filled(depth.size(), 0);
-        mark(&mut mask, 2..14, 34..44); // 120 px of floor
-        let before = mask.clone();
-        let stats = completion(50 * VGA_PER_PIXEL, SUPPORT)
-            .complete(&mut mask, &depth)
-            .unwrap();
-        assert_eq!((stats.completed, stats.dropped, stats.supported), (0, 1, 0));
-        assert_eq!(mask, before);
+        // 120 px of floor.
+        assert_growth_dropped(&scene(), 2..14, 34..44, SUPPORT);
     }
 
     #[test]
