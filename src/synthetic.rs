@@ -240,6 +240,11 @@ pub enum Scenario {
     /// away, 6 °/s); the camera pans after it, looking down 15°
     /// ([`FailureClass::DominantFromStart`]).
     HeldOutCloseOnFloor,
+    /// Held out: a low, wide block (1.6 m × 1.0 m × 0.6 m, a sofa or a cart) standing on the
+    /// floor 1.4 m away covers more than half of the first frame, its front and its top in
+    /// view, and moves slowly sideways while turning (0.25 m/s, 0.05 m/s away, −3 °/s); the
+    /// camera looks down 30°, so the floor is in view below it ([`FailureClass::DominantFromStart`]).
+    HeldOutWideOnFloor,
 }
 
 /// The failure classes the later scenarios exercise (objects the occlusion detector finds
@@ -301,7 +306,7 @@ impl Scenario {
 
     /// Held-out scenarios: the same failure classes with other seeds, sizes, speeds, depths and
     /// camera paths. No default is tuned on them; report them apart.
-    pub const HELD_OUT: [Scenario; 8] = [
+    pub const HELD_OUT: [Scenario; 9] = [
         Scenario::HeldOutInViewAtStart,
         Scenario::HeldOutRestsThenMoves,
         Scenario::HeldOutHeadOnApproach,
@@ -310,11 +315,12 @@ impl Scenario {
         Scenario::HeldOutStatic,
         Scenario::HeldOutDominantOnFloor,
         Scenario::HeldOutCloseOnFloor,
+        Scenario::HeldOutWideOnFloor,
     ];
 
     /// Every scenario: [`Scenario::ALL`], then [`Scenario::FAILURE_CLASSES`], then
     /// [`Scenario::HELD_OUT`].
-    pub const EVERY: [Scenario; 22] = [
+    pub const EVERY: [Scenario; 23] = [
         Scenario::SmallObjectCrossing,
         Scenario::DominantObject,
         Scenario::EnteringWhilePanning,
@@ -337,6 +343,7 @@ impl Scenario {
         Scenario::HeldOutStatic,
         Scenario::HeldOutDominantOnFloor,
         Scenario::HeldOutCloseOnFloor,
+        Scenario::HeldOutWideOnFloor,
     ];
 
     /// The scenario called `name` ([`Self::name`]).
@@ -370,7 +377,8 @@ impl Scenario {
             Scenario::DominantFromStart
             | Scenario::HeldOutDominantFromStart
             | Scenario::HeldOutDominantOnFloor
-            | Scenario::HeldOutCloseOnFloor => Some(FailureClass::DominantFromStart),
+            | Scenario::HeldOutCloseOnFloor
+            | Scenario::HeldOutWideOnFloor => Some(FailureClass::DominantFromStart),
             Scenario::StaticDesk | Scenario::HeldOutStatic => Some(FailureClass::StaticControl),
         }
     }
@@ -408,6 +416,7 @@ impl Scenario {
             Scenario::HeldOutStatic => "held_out_static",
             Scenario::HeldOutDominantOnFloor => "held_out_dominant_on_floor",
             Scenario::HeldOutCloseOnFloor => "held_out_close_on_floor",
+            Scenario::HeldOutWideOnFloor => "held_out_wide_on_floor",
         }
     }
 }

@@ -418,6 +418,28 @@ impl SyntheticSequence {
                 };
                 (camera, vec![b], 90)
             }
+            Scenario::HeldOutWideOnFloor => {
+                // Standing on the floor (y = 1.4): centre 0.5 m above it, front face at 1.4 m.
+                let b = box_moving_since(
+                    Vector3::new(0.1, 0.9, 1.7),
+                    Vector3::new(0.8, 0.5, 0.3),
+                    MOVING_SINCE_S,
+                    Vector3::new(-0.25, 0.0, 0.05),
+                    -0.05,
+                    seed ^ 0x9a,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::zeros(),
+                    velocity_mps: Vector3::new(-0.02, 0.0, 0.03),
+                    sway_amplitude_m: Vector3::new(0.04, 0.02, 0.03),
+                    sway_period_s: 2.6,
+                    yaw_rate_radps: 0.0,
+                    yaw_amplitude_rad: 0.04,
+                    pitch_amplitude_rad: 0.02,
+                    pitch_offset_rad: -0.52,
+                };
+                (camera, vec![b], 90)
+            }
         };
         Self {
             scenario: Some(scenario),

@@ -288,7 +288,8 @@ fn failure_class_scenarios_show_their_class() {
             Scenario::DominantFromStart
             | Scenario::HeldOutDominantFromStart
             | Scenario::HeldOutDominantOnFloor
-            | Scenario::HeldOutCloseOnFloor => {
+            | Scenario::HeldOutCloseOnFloor
+            | Scenario::HeldOutWideOnFloor => {
                 assert!(first > 0.5, "{name}: {first} of frame 0")
             }
             Scenario::RestsThenMovesSlowly | Scenario::HeldOutRestsThenMoves | Scenario::HeadOnApproach => {
