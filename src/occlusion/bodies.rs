@@ -182,6 +182,9 @@ pub struct BodyCompletion {
     grown_sample: Vec<[f32; 3]>,
     /// The component's own faces passed over while its support planes are sought.
     own_planes: Vec<[f32; 3]>,
+    /// What the next support plane is fitted to: the leaking growth off the planes taken out
+    /// and off the own faces.
+    fit_candidates: Vec<u32>,
 }
 
 /// Valid depth: positive and finite (0 and NaN mark missing measurements).
@@ -210,6 +213,7 @@ impl BodyCompletion {
             seed_sample: Vec::with_capacity(SUPPORT_SAMPLE),
             grown_sample: Vec::with_capacity(SUPPORT_SAMPLE),
             own_planes: Vec::with_capacity(config.max_own_planes),
+            fit_candidates: Vec::new(),
         })
     }
 
@@ -432,18 +436,18 @@ impl BodyCompletion {
         // The component's own faces found so far: passed over, and left out of later fits.
         let mut own_planes = std::mem::take(&mut self.own_planes);
         own_planes.clear();
+        let mut candidates = std::mem::take(&mut self.fit_candidates);
         let mut taken_out = 0;
         while taken_out < SUPPORT_MAX_PLANES {
-            let candidate = |i: u32| {
+            candidates.clear();
+            candidates.extend(self.leaked_growth.iter().copied().filter(|&i| {
                 self.state[i as usize] == OFF_PLANE && !own_planes.iter().any(|plane| on(plane, &point(i)))
-            };
-            let remaining = self.leaked_growth.iter().filter(|&&i| candidate(i)).count();
+            }));
             grown_sample.clear();
             grown_sample.extend(
-                self.leaked_growth
+                candidates
                     .iter()
-                    .filter(|&&i| candidate(i))
-                    .step_by(stride(remaining))
+                    .step_by(stride(candidates.len()))
                     .map(|&i| point(i)),
             );
             if grown_sample.len() < 3 {
@@ -510,7 +514,12 @@ impl BodyCompletion {
         if !kept {
             self.queue.truncate(seeds);
         }
-        (self.seed_sample, self.grown_sample, self.own_planes) = (seed_sample, grown_sample, own_planes);
+        (
+            self.seed_sample,
+            self.grown_sample,
+            self.own_planes,
+            self.fit_candidates,
+        ) = (seed_sample, grown_sample, own_planes, candidates);
         kept
     }
 
