@@ -88,6 +88,12 @@ pub struct OcclusionConfig {
     /// rim a slowly moving body leaves along its edges, and the base of a limb, stay with the
     /// body, while strips with no thick part nearby are erased as before. 0 = the plain opening.
     pub thin_structure_reconnect_px: usize,
+    /// Pixels the thin-structure filter erased in the previous frame (carried by the warp)
+    /// count as object pixels in this frame's opening, without joining the set: a leading edge
+    /// that advances by 1–2 px a frame leaves a new thin strip each frame beside the one erased
+    /// before, and the two together are thick enough to stay, while a flickering band returns
+    /// to the same pixels and stays thin. false = each frame's opening alone.
+    pub thin_structure_advance: bool,
     /// A predicted component that is not attached to a non-predicted object pixel is still kept
     /// when it holds pixels that were predicted object in the previous frame and it reaches
     /// within this many pixels of the image border: an object leaving the view loses its
@@ -149,6 +155,7 @@ impl Default for OcclusionConfig {
             thin_structure_radius_px: 1,
             thin_structure_border_margin_px: 16,
             thin_structure_reconnect_px: THIN_STRUCTURE_RECONNECT_PX,
+            thin_structure_advance: true,
             prune_exit_margin_px: EXIT_MARGIN_PX,
             exit_min_object_fraction: EXIT_MIN_OBJECT_FRACTION,
             invalid_depth_gap_px_vga: INVALID_DEPTH_GAP_PX_VGA,

@@ -64,6 +64,12 @@ use transport::{PixelBounds, PixelRays, TransportInputs, TransportOutputs, Trans
 /// Pixels of a VGA image, the resolution the object threshold is given for.
 const VGA_PIXELS: usize = 640 * 480;
 
+/// Flag of the carried map P: a predicted object pixel (step 12's P).
+const PREDICTED: u8 = 1;
+/// Flag of the carried map P: a pixel the thin-structure filter erased in that frame
+/// ([`OcclusionConfig::thin_structure_advance`]).
+const THIN_ERASED: u8 = 2;
+
 /// A pixel count given at 640 × 480 scaled to the area of `size` (at least 1).
 fn scaled_pixels(pixels_vga: usize, size: ImageSize) -> usize {
     ((pixels_vga as f64 * size.area() as f64 / VGA_PIXELS as f64).round() as usize).max(1)
@@ -144,7 +150,8 @@ pub struct OcclusionDetector {
     compensated_m: DepthMeters,
     /// Accumulation map A of the latest frame (m).
     accumulation_m: DepthMeters,
-    /// Predicted-area map P (0 / 1).
+    /// Predicted-area map P ([`PREDICTED`]) and the thin-structure filter's erased pixels
+    /// ([`THIN_ERASED`]): the flags the next frame carries through the warp.
     predicted: Image<u8>,
     /// The final mask O.
     mask: Mask,
@@ -307,7 +314,9 @@ impl OcclusionDetector {
         &self.newly_discovered
     }
 
-    /// Predicted-area map P of the latest frame (0 / 1).
+    /// Per-pixel flags of the latest frame that the next frame carries through the warp: bit 0
+    /// the predicted-area map P (step 12), bit 1 the pixels the thin-structure filter erased
+    /// ([`OcclusionConfig::thin_structure_advance`]).
     pub fn predicted_area(&self) -> &Image<u8> {
         &self.predicted
     }
@@ -514,7 +523,7 @@ impl OcclusionDetector {
                     },
                     counts.object_bounds,
                     &self.compensated_m,
-                    &self.newly_discovered,
+                    (&self.newly_discovered, &self.predicted_carried),
                     &mut self.accumulation_m,
                 )
             },
@@ -593,6 +602,9 @@ impl OcclusionDetector {
                 &mut self.mask,
                 &mut self.accumulation_m,
             );
+        }
+        if self.config.thin_structure_advance {
+            self.components.flag_thin_erased(&mut self.predicted);
         }
         self.stats.mask_pixels = object_pixels - self.stats.pruned_pixels;
         debug_assert_eq!(

@@ -744,7 +744,7 @@ fn the_mask_is_exactly_the_thresholded_accumulation_after_every_update() {
             for (p, &m) in detector.mask().as_slice().iter().enumerate() {
                 let object = a[p] > config.threshold(config.alpha, zc[p]);
                 assert_eq!(m != 0, object, "{scenario:?} frame {i} pixel {p}");
-                assert!(detector.predicted_area().as_slice()[p] == 0 || object);
+                assert!(detector.predicted_area().as_slice()[p] & PREDICTED == 0 || object);
             }
             predicted_frames += usize::from(detector.stats().predicted_pixels > 0);
             object_frames += usize::from(detector.stats().mask_pixels > 0);
@@ -836,9 +836,12 @@ fn run_slow(
 #[test]
 fn slow_evidence_finds_a_head_on_approach_that_the_paper_misses() {
     // The box approaches at 0.7 m/s (2.3 cm per frame) from 3.5 m: ΔZ stays far below
-    // τ_α ≈ 0.5 m, so the paper's detector never marks it.
+    // τ_α ≈ 0.5 m, so the paper's detector never marks it. (Its outline widens by about a
+    // pixel a frame, a true occlusion event that the thin-structure filter's advance rule
+    // lets through; that rule is left out here with the slow-change evidence.)
     let paper_config = OcclusionConfig {
         slow_evidence: None,
+        thin_structure_advance: false,
         ..OcclusionConfig::default()
     };
     let (paper, _) = run_slow(Scenario::HeadOnApproach, paper_config, None);

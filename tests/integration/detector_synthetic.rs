@@ -399,24 +399,23 @@ fn failure_class_static_desk() {
 
 /// Held out (no default was tuned on these; the slow-change evidence's parameters were chosen
 /// on the failure classes and the Bonn window, and these were run afterwards; reported apart,
-/// bounds looser): measured at 320×240 F1 / onset: in view at start 0.955 / 0, rests then
-/// moves 0.986 / 0, head-on 0.962 / 2, sliding on the floor 0.912 / 4 (0.821 before the
+/// bounds looser): measured at 320×240 F1 / onset: in view at start 0.954 / 0, rests then
+/// moves 0.984 / 0, head-on 0.962 / 2, sliding on the floor 0.912 / 4 (0.821 before the
 /// support plane of docs/method.md D27, whose tolerance was chosen before it ran), dominant from start
-/// 0.975 / 0 (ATE 0.038 m; 0.235 / never before the body completion of docs/method.md D26,
+/// 0.987 / 0 (ATE 0.037 m; 0.235 / never before the body completion of docs/method.md D26,
 /// whose gates were chosen with this board in view, so it is no longer held out for D26);
 /// static 0 % false positives; a block standing on the floor, the floor in view, that fills
 /// more than half the view from the first frame (added after D26, run once as defined: F1
 /// 0.734, onset 2, its leading half; its own face was the largest plane of its growth, so the
-/// completion dropped it): 0.889 (P 1.000, R 0.823), onset 0, ATE 0.034 m now that D27 passes
+/// completion dropped it): 0.903 (P 1.000, R 0.842), onset 0, ATE 0.034 m now that D27 passes
 /// over a body's own faces, a rule built on it (so it is held out no longer for that rule); a
 /// nearer, narrower block on the floor that turns as it moves off (added after that rule, run
-/// once as defined): 0.990, onset 0, ATE 0.022 m, the same without the rule. Bounds: the targets (dominant boards and
+/// once as defined): 0.993, onset 0, ATE 0.022 m, the same without the rule. Bounds: the targets (dominant boards and
 /// blocks: ATE 0.10 m). A low, wide block on the floor that moves slowly sideways (added
-/// after that, run once as defined) is not found: F1 0.012, never half found (0.022 with the
-/// true poses). Its edges advance about 1.5 px a frame at this size; the thin-structure opening
-/// (docs/method.md D6) erases the accumulation of every strip narrower than 3 px, so its
-/// leading edge never builds up. [`a_slowly_advancing_edge_is_lost_to_the_thin_structure_opening`]
-/// holds that diagnosis; this test holds the other held-out scenarios to the targets.
+/// after that, run once as defined: F1 0.012, never half found; the thin-structure filter's
+/// advance rule was then built on it, so it is held out no longer for that rule) misses the
+/// onset target: [`a_slowly_advancing_edge_is_found_by_the_advance_rule`] holds it; this test
+/// holds the other held-out scenarios to the targets.
 #[test]
 fn held_out_scenarios() {
     let diagnosed = [Scenario::HeldOutWideOnFloor];
@@ -448,26 +447,49 @@ fn held_out_scenarios() {
     }
 }
 
-/// The held-out wide block on the floor (see [`held_out_scenarios`]), a known failure and its
-/// cause. Measured at 320×240, offline with DVO: the default F1 0.012 (R 0.006), never half
-/// found, ATE 0.171 m; without the thin-structure opening (`thin_structure_radius_px` 0) F1
-/// 0.990, onset 0, ATE 0.029 m, but that costs the static recordings their false-positive
-/// targets (docs/method.md D6 and D25, with what else was tried). Bounds: the default below 0.1 (when a change finds the block, this
-/// fails so that the limitation in README.md and docs/accuracy.md is updated), without the
-/// opening the class targets.
+/// The held-out wide block on the floor (see [`held_out_scenarios`]): its edges advance about
+/// 1.5 px a frame at 320×240, and the thin-structure opening (docs/method.md D6) erased each
+/// frame's leading strip with its accumulation: F1 0.012, never half found. The advance rule
+/// (`OcclusionConfig::thin_structure_advance`) finds it. Measured at 320×240, offline: with
+/// the true poses F1 0.991, onset 0; with the closed loop F1 0.781, onset 19, ATE 0.048 m (the
+/// block pulls the first pass's DVO before any of it is masked, and on those poses the backward
+/// pass marks too little of it to seed the body completion until frame 19); the plain opening
+/// (`thin_structure_advance` false) F1 0.012. Bounds: the plain opening below 0.1; the true
+/// poses the class targets; the closed loop F1 ≥ 0.70 and, while it misses the onset target,
+/// an onset above it (when a change meets the targets this fails, so that the limitation in
+/// README.md and docs/accuracy.md is updated and the scenario joins [`held_out_scenarios`]).
 #[test]
-fn a_slowly_advancing_edge_is_lost_to_the_thin_structure_opening() {
+fn a_slowly_advancing_edge_is_found_by_the_advance_rule() {
     let scenario = Scenario::HeldOutWideOnFloor;
     let name = scenario.name();
-    let default = default_mode(scenario);
+    let mut plain_opening = ProcessorConfig::default();
+    plain_opening.occlusion.thin_structure_advance = false;
+    let plain = offline_mode(scenario, &plain_opening, " with the plain thin-structure opening");
     assert!(
-        default.segmentation.mean_f1 < 0.1,
-        "{name}: F1 {:.3}: found now; update the limitation in README.md and docs/accuracy.md",
-        default.segmentation.mean_f1
+        plain.segmentation.mean_f1 < 0.1,
+        "{name}: F1 {:.3}",
+        plain.segmentation.mean_f1
     );
-    let mut no_opening = ProcessorConfig::default();
-    no_opening.occlusion.thin_structure_radius_px = 0;
-    let score = offline_mode(scenario, &no_opening, " without the thin-structure opening");
-    assert_class(&score, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
-    assert!(score.ate_m <= 0.10, "{name}: ATE {:.3} m", score.ate_m);
+    let true_pose = run_mode(
+        scenario,
+        EvalMode::TruePoseOffline,
+        &ProcessorConfig::default(),
+        " with the true poses",
+    );
+    assert_class(&true_pose, name, CLASS_F1_TARGET, ONSET_TARGET_FRAMES);
+    let closed_loop = default_mode(scenario);
+    assert!(
+        closed_loop.segmentation.mean_f1 >= 0.70,
+        "{name}: F1 {:.3}",
+        closed_loop.segmentation.mean_f1
+    );
+    assert!(
+        closed_loop.onset_never
+            || closed_loop
+                .worst_onset_frames
+                .is_some_and(|d| d > ONSET_TARGET_FRAMES),
+        "{name}: onset {}: meets the target now; update the limitation in README.md and \
+         docs/accuracy.md and hold it in held_out_scenarios",
+        onset_text(&closed_loop)
+    );
 }

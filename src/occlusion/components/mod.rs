@@ -5,7 +5,7 @@
 
 use super::runs::{Run, RunLabelling};
 use super::transport::PixelBounds;
-use super::{Adjacency, OcclusionConfig};
+use super::{Adjacency, OcclusionConfig, PREDICTED, THIN_ERASED};
 use crate::image_buf::{DepthMeters, Image, ImageSize, Mask, MASK_SET};
 
 mod morphology;
@@ -60,6 +60,10 @@ pub(super) struct Components {
     /// Morphology scratch (0 / 1 per pixel).
     morph_a: Vec<u8>,
     morph_b: Vec<u8>,
+    /// The pixels the thin-structure filter erased in the latest labelling.
+    thin_erased: Vec<u32>,
+    /// Scratch of the thin-structure filter (the previous frame's erased pixels in its box).
+    thin_advance: Vec<u32>,
     /// Components of the object set.
     runs: RunLabelling,
     /// Stamp every pixel of a component as prediction source (the reference for the agreement
@@ -155,6 +159,10 @@ struct ThinStructureFilter<'a> {
     /// Morphology scratch (0 / 1 per pixel).
     opened: &'a mut [u8],
     scratch: &'a mut [u8],
+    /// The pixels it erases (cleared first).
+    erased_pixels: &'a mut Vec<u32>,
+    /// Scratch: the previous frame's erased pixels that join this frame's opening.
+    advance_pixels: &'a mut Vec<u32>,
     width: usize,
     height: usize,
 }
@@ -166,16 +174,47 @@ impl ThinStructureFilter<'_> {
     /// geodesic distance of the opening rejoin it). Object pixels not covered by the result and
     /// farther than `border_margin_px` from the image border (where an object entering the view
     /// first appears as a thin sliver) leave the object set and lose their accumulation, like
-    /// small components. Returns the pixels erased.
+    /// small components. With `previous_erased` (the carried flags of the previous frame's
+    /// erased pixels, see [`THIN_ERASED`]), those pixels count as set pixels in the opening and
+    /// the reconnection without joining the set. Returns the pixels erased; lists them in
+    /// `erased_pixels`.
     fn erase(
         self,
         radius: usize,
         reconnect_px: usize,
         border_margin_px: usize,
         bounds: PixelBounds,
+        previous_erased: Option<&[u8]>,
         accumulation_m: &mut DepthMeters,
     ) -> usize {
         let (width, height) = (self.width, self.height);
+        self.erased_pixels.clear();
+        self.advance_pixels.clear();
+        // A previous frame's pixel helps a set pixel stay only within the opening's square
+        // (2r) plus the reconnection's reach of it.
+        let bounds = match previous_erased {
+            None => bounds,
+            Some(previous) => {
+                let margin = 2 * radius + reconnect_px;
+                let grown = PixelBounds {
+                    x0: bounds.x0.saturating_sub(margin),
+                    x1: (bounds.x1 + margin).min(width - 1),
+                    y0: bounds.y0.saturating_sub(margin),
+                    y1: (bounds.y1 + margin).min(height - 1),
+                };
+                for y in grown.y0..=grown.y1 {
+                    let row = y * width;
+                    for x in grown.x0..=grown.x1 {
+                        let i = row + x;
+                        if previous[i] & THIN_ERASED != 0 && self.object_set[i] == 0 {
+                            self.object_set[i] = 1;
+                            self.advance_pixels.push(i as u32);
+                        }
+                    }
+                }
+                grown
+            }
+        };
         // The opening runs on the set's bounding box only: pixels outside the box are
         // background, both in the set and in its erosion (a subset of the set), which is
         // exactly how the filter treats pixels outside its image.
@@ -192,6 +231,9 @@ impl ThinStructureFilter<'_> {
             scratch,
             opened,
         );
+        for &i in self.advance_pixels.iter() {
+            self.object_set[i as usize] = 0;
+        }
         let mut erased = 0;
         let a = accumulation_m.as_mut_slice();
         // Interior columns of the box (pixels nearer the border than the margin are kept).
@@ -218,10 +260,11 @@ impl ThinStructureFilter<'_> {
                 continue;
             }
             let a_row = &mut a[y * width + x_first..y * width + x_end];
-            for ((s, &o), a) in set_row.iter_mut().zip(opened_row).zip(a_row) {
+            for (x, ((s, &o), a)) in set_row.iter_mut().zip(opened_row).zip(a_row).enumerate() {
                 if *s & (o ^ 1) != 0 {
                     *s = 0;
                     *a = 0.0;
+                    self.erased_pixels.push((y * width + x_first + x) as u32);
                 }
             }
             erased += row_erased as usize;
@@ -338,6 +381,8 @@ impl Components {
             updates: Vec::with_capacity(n),
             morph_a: vec![0; n],
             morph_b: vec![0; n],
+            thin_erased: Vec::new(),
+            thin_advance: Vec::new(),
             runs: RunLabelling::new(size.width, size.height),
             stamp_all_sources: false,
         }
@@ -350,6 +395,8 @@ impl Components {
             object_set: &mut self.object_set,
             opened: &mut self.morph_a,
             scratch: &mut self.morph_b,
+            erased_pixels: &mut self.thin_erased,
+            advance_pixels: &mut self.thin_advance,
             width,
             height,
         };
@@ -371,17 +418,19 @@ impl Components {
     /// Step 10: labels the object set already in the object-set buffer (bounding box `bounds`),
     /// erases components below `min_size` from A and, when enabled, grows the others
     /// into Ñ. Components are handled in the row-major order of their first pixel (they share
-    /// the prediction target, so the order matters).
+    /// the prediction target, so the order matters). The thin-structure filter's advance rule
+    /// reads the previous frame's erased pixels ([`THIN_ERASED`]) in `predicted_carried`.
     pub(super) fn suppress_and_predict(
         &mut self,
         config: &OcclusionConfig,
         min_size: MinObjectSize<'_>,
         bounds: Option<PixelBounds>,
         compensated_m: &DepthMeters,
-        newly_discovered: &Image<u8>,
+        (newly_discovered, predicted_carried): (&Image<u8>, &Image<u8>),
         accumulation_m: &mut DepthMeters,
     ) -> LabelStats {
         let mut stats = LabelStats::default();
+        self.thin_erased.clear();
         let Some(bounds) = bounds else {
             return stats;
         };
@@ -395,6 +444,9 @@ impl Components {
                     config.thin_structure_reconnect_px,
                     config.thin_structure_border_margin_px,
                     bounds,
+                    config
+                        .thin_structure_advance
+                        .then(|| predicted_carried.as_slice()),
                     accumulation_m,
                 ),
             },
@@ -614,6 +666,15 @@ impl Components {
         added
     }
 
+    /// Flags the pixels the thin-structure filter erased in the latest labelling in `predicted`
+    /// ([`THIN_ERASED`]) for the next frame's opening.
+    pub(super) fn flag_thin_erased(&self, predicted: &mut Image<u8>) {
+        let p = predicted.as_mut_slice();
+        for &i in &self.thin_erased {
+            p[i as usize] |= THIN_ERASED;
+        }
+    }
+
     /// Step 12: erases (from A, O and P) every 8-connected component of `predicted` that has no
     /// pixel adjacent to an object pixel outside `predicted`, unless it is a leaving object's
     /// remainder: it holds a pixel of `predicted_carried` (predicted object in the previous
@@ -656,7 +717,7 @@ impl Components {
             let leaving = exit_margin_px > 0
                 && runs
                     .iter()
-                    .any(|run| carried[run.pixels(width)].iter().any(|&c| c != 0))
+                    .any(|run| carried[run.pixels(width)].iter().any(|&c| c & PREDICTED != 0))
                 && runs.iter().any(near_border);
             if !attached && !leaving {
                 for run in runs {

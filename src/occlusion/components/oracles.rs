@@ -64,7 +64,9 @@ impl Components {
                 })
             });
             let leaving = exit_margin_px > 0
-                && component.iter().any(|&q| carried[q as usize] != 0)
+                && component
+                    .iter()
+                    .any(|&q| carried[q as usize] & super::super::PREDICTED != 0)
                 && component.iter().any(|&q| near_border(q));
             if !attached && !leaving {
                 let (m, a, p) = (

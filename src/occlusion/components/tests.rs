@@ -302,7 +302,7 @@ fn prediction_with_stamps_near_the_target_matches_stamping_every_source() {
                 },
                 Some(bounds),
                 &depth,
-                &newly,
+                (&newly, &Image::filled(size, 0u8)),
                 &mut a,
             );
             // The target is left all 0 for the next frame.
@@ -349,23 +349,93 @@ fn thin_structure_opening_on_the_bounding_box_matches_the_whole_image() {
         y0: 0,
         y1: size.height - 1,
     };
+    // The previous frame's erased pixels: a scattered band along the blob's left side.
+    let previous: Vec<u8> = (0..size.area())
+        .map(|i| {
+            let x = i % size.width;
+            if (6..12).contains(&x) && rng.below(10) < 8 {
+                THIN_ERASED
+            } else {
+                0
+            }
+        })
+        .collect();
     for (radius, reconnect, margin) in [(1, 0, 0), (1, 0, 12), (2, 0, 3), (1, 2, 0), (2, 3, 5)] {
-        let run = |bounds: PixelBounds| {
-            let mut components = Components::new(size);
-            components.object_set.copy_from_slice(&set);
-            let mut a = DepthMeters::filled(size, 1.0);
-            let erased = components
-                .thin_filter_and_targets()
-                .0
-                .erase(radius, reconnect, margin, bounds, &mut a);
-            (erased, components.object_set, a.into_vec())
-        };
-        let (fast, slow) = (run(bounding), run(whole));
-        assert!(slow.0 > 0, "radius {radius}");
-        assert_eq!(
-            fast, slow,
-            "radius {radius} reconnect {reconnect} margin {margin}"
-        );
+        for previous in [None, Some(&previous[..])] {
+            let run = |bounds: PixelBounds| {
+                let mut components = Components::new(size);
+                components.object_set.copy_from_slice(&set);
+                let mut a = DepthMeters::filled(size, 1.0);
+                let erased = components
+                    .thin_filter_and_targets()
+                    .0
+                    .erase(radius, reconnect, margin, bounds, previous, &mut a);
+                (
+                    erased,
+                    components.thin_erased,
+                    components.object_set,
+                    a.into_vec(),
+                )
+            };
+            let (fast, slow) = (run(bounding), run(whole));
+            assert!(slow.0 > 0, "radius {radius}");
+            assert_eq!(slow.0, slow.1.len());
+            assert_eq!(
+                fast,
+                slow,
+                "radius {radius} reconnect {reconnect} margin {margin} previous {}",
+                previous.is_some()
+            );
+        }
+    }
+}
+
+/// A one-pixel strip (a leading edge that advanced by a pixel) stays when the previous frame
+/// erased the two columns beside it (the edge before), and is erased when the previous frame
+/// erased it in place (a band that flickers) or nothing; the previous frame's pixels never join
+/// the set.
+#[test]
+fn a_strip_beside_the_previous_frames_erased_strip_stays_and_one_in_place_goes() {
+    let size = ImageSize::new(40, 30);
+    let strip = |x: usize, y: usize| x == 20 && (5..25).contains(&y);
+    let set: Vec<u8> = (0..size.area())
+        .map(|i| u8::from(strip(i % size.width, i / size.width)))
+        .collect();
+    let bounds = PixelBounds {
+        x0: 20,
+        x1: 20,
+        y0: 5,
+        y1: 24,
+    };
+    let flags = |columns: std::ops::Range<usize>| -> Vec<u8> {
+        (0..size.area())
+            .map(|i| {
+                let (x, y) = (i % size.width, i / size.width);
+                if columns.contains(&x) && (5..25).contains(&y) {
+                    THIN_ERASED
+                } else {
+                    0
+                }
+            })
+            .collect()
+    };
+    let (beside, in_place, none) = (flags(18..20), flags(20..21), flags(0..0));
+    for (previous, stays) in [(&beside, true), (&in_place, false), (&none, false)] {
+        let mut components = Components::new(size);
+        components.object_set.copy_from_slice(&set);
+        let mut a = DepthMeters::filled(size, 0.0);
+        for (i, &s) in set.iter().enumerate() {
+            a.as_mut_slice()[i] = f32::from(s);
+        }
+        let erased = components
+            .thin_filter_and_targets()
+            .0
+            .erase(1, 2, 0, bounds, Some(previous), &mut a);
+        assert_eq!(erased, if stays { 0 } else { 20 });
+        assert_eq!(components.thin_erased.len(), erased);
+        let expected: Vec<u8> = set.iter().map(|&s| if stays { s } else { 0 }).collect();
+        assert!(components.object_set == expected, "stays {stays}");
+        assert_eq!(a.as_slice().iter().sum::<f32>(), if stays { 20.0 } else { 0.0 });
     }
 }
 
@@ -425,7 +495,7 @@ fn thin_structure_reconnection_keeps_the_set_within_its_geodesic_distance_of_the
         let erased = components
             .thin_filter_and_targets()
             .0
-            .erase(1, reconnect, 0, whole, &mut a);
+            .erase(1, reconnect, 0, whole, None, &mut a);
         let expected: Vec<u8> = distance.iter().map(|d| u8::from(d.is_some())).collect();
         assert_eq!(components.object_set, expected, "reconnect {reconnect}");
         let kept = expected.iter().filter(|&&k| k != 0).count();
@@ -518,7 +588,15 @@ fn a_leaving_objects_remainder_stays_down_to_the_exit_size() {
                 border_margin_px: 2,
             }),
         };
-        let stats = labelling.suppress_and_predict(&config, min_size, Some(bounds), &depth, &newly, &mut a);
+        let no_flags = Image::filled(size, 0u8);
+        let stats = labelling.suppress_and_predict(
+            &config,
+            min_size,
+            Some(bounds),
+            &depth,
+            (&newly, &no_flags),
+            &mut a,
+        );
         assert_eq!(stats.components, components.len());
         for (k, (component, stays_when_leaving)) in components.iter().enumerate() {
             let stays = if leaving {

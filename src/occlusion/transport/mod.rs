@@ -720,7 +720,7 @@ fn object_mask_block_generic(
     let keep = if parameters.predicting { u8::MAX } else { 0 };
     let mut predicted_count = 0u32;
     for i in 0..len {
-        let is_predicted = mask[i] & (carried[i] | newly[i]) & keep != 0;
+        let is_predicted = mask[i] & ((carried[i] & super::PREDICTED) | newly[i]) & keep != 0;
         predicted[i] = u8::from(is_predicted);
         predicted_count += u32::from(is_predicted);
     }
