@@ -77,9 +77,9 @@ pub struct ProcessArgs {
 
     /// Offline processing at the input's own resolution. By default the offline mode halves
     /// frames while their short side stays at least 240 px (VGA runs at 320×240, masks enlarged
-    /// back): on VGA 1.7× the frames/s, the closed loop as accurate, the masks less complete
-    /// (people walking: F1 0.93 against 0.94; docs/method.md, D24, D25). The causal mode always
-    /// runs at full resolution.
+    /// back): on VGA 1.7× the frames/s, the closed loop as accurate, the masks a little less
+    /// complete (docs/accuracy.md, docs/method.md D24). The causal mode always runs at full
+    /// resolution.
     #[arg(long, conflicts_with = "causal")]
     pub full_resolution: bool,
 
