@@ -440,6 +440,28 @@ impl SyntheticSequence {
                 };
                 (camera, vec![b], 90)
             }
+            Scenario::HeldOutSlowCart => {
+                // Standing on the floor (y = 1.4): centre 0.45 m above it, front face at 2.2 m.
+                let b = box_moving_since(
+                    Vector3::new(0.3, 0.95, 2.45),
+                    Vector3::new(0.45, 0.45, 0.25),
+                    MOVING_SINCE_S,
+                    Vector3::new(-0.3, 0.0, 0.0),
+                    0.0,
+                    seed ^ 0x9b,
+                );
+                let camera = CameraPath {
+                    start_m: Vector3::zeros(),
+                    velocity_mps: Vector3::new(0.02, 0.0, 0.03),
+                    sway_amplitude_m: Vector3::new(0.04, 0.02, 0.03),
+                    sway_period_s: 2.7,
+                    yaw_rate_radps: 0.0,
+                    yaw_amplitude_rad: 0.04,
+                    pitch_amplitude_rad: 0.02,
+                    pitch_offset_rad: -0.26,
+                };
+                (camera, vec![b], 90)
+            }
         };
         Self {
             scenario: Some(scenario),

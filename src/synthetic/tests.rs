@@ -282,7 +282,8 @@ fn failure_class_scenarios_show_their_class() {
             Scenario::InViewAtStart
             | Scenario::StopAndGo
             | Scenario::HeldOutInViewAtStart
-            | Scenario::HeldOutHeadOnApproach => {
+            | Scenario::HeldOutHeadOnApproach
+            | Scenario::HeldOutSlowCart => {
                 assert!(first > 0.01, "{name}: moving in view at frame 0 ({first})")
             }
             Scenario::DominantFromStart

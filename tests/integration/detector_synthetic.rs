@@ -415,10 +415,11 @@ fn failure_class_static_desk() {
 /// after that, run once as defined: F1 0.012, never half found; the thin-structure filter's
 /// advance rule was then built on it, so it is held out no longer for that rule) misses the
 /// onset target: [`a_slowly_advancing_edge_is_found_by_the_advance_rule`] holds it; this test
-/// holds the other held-out scenarios to the targets.
+/// holds the other held-out scenarios to the targets. A slow cart (added after the advance
+/// rule, run once as defined) misses the F1 target: [`a_slow_cart_is_lost_in_the_last_frames`].
 #[test]
 fn held_out_scenarios() {
-    let diagnosed = [Scenario::HeldOutWideOnFloor];
+    let diagnosed = [Scenario::HeldOutWideOnFloor, Scenario::HeldOutSlowCart];
     for scenario in Scenario::HELD_OUT.into_iter().filter(|s| !diagnosed.contains(s)) {
         let score = default_mode(scenario);
         let name = scenario.name();
@@ -447,6 +448,20 @@ fn held_out_scenarios() {
     }
 }
 
+/// `scenario` offline with DVO and the plain thin-structure opening (no advance rule) scores an
+/// F1 below `f1_below`.
+fn assert_plain_opening_misses(scenario: Scenario, f1_below: f64) {
+    let mut plain_opening = ProcessorConfig::default();
+    plain_opening.occlusion.thin_structure_advance = false;
+    let plain = offline_mode(scenario, &plain_opening, " with the plain thin-structure opening");
+    let f1 = plain.segmentation.mean_f1;
+    assert!(
+        f1 < f1_below,
+        "{}: F1 {f1:.3} with the plain opening",
+        scenario.name()
+    );
+}
+
 /// The held-out wide block on the floor (see [`held_out_scenarios`]): its edges advance about
 /// 1.5 px a frame at 320×240, and the thin-structure opening (docs/method.md D6) erased each
 /// frame's leading strip with its accumulation: F1 0.012, never half found. The advance rule
@@ -462,14 +477,7 @@ fn held_out_scenarios() {
 fn a_slowly_advancing_edge_is_found_by_the_advance_rule() {
     let scenario = Scenario::HeldOutWideOnFloor;
     let name = scenario.name();
-    let mut plain_opening = ProcessorConfig::default();
-    plain_opening.occlusion.thin_structure_advance = false;
-    let plain = offline_mode(scenario, &plain_opening, " with the plain thin-structure opening");
-    assert!(
-        plain.segmentation.mean_f1 < 0.1,
-        "{name}: F1 {:.3}",
-        plain.segmentation.mean_f1
-    );
+    assert_plain_opening_misses(scenario, 0.1);
     let true_pose = run_mode(
         scenario,
         EvalMode::TruePoseOffline,
@@ -491,5 +499,33 @@ fn a_slowly_advancing_edge_is_found_by_the_advance_rule() {
         "{name}: onset {}: meets the target now; update the limitation in README.md and \
          docs/accuracy.md and hold it in held_out_scenarios",
         onset_text(&closed_loop)
+    );
+}
+
+/// The held-out slow cart (added after the advance rule, run once as defined): a cart 2.2 m away
+/// rolls sideways at 0.3 m/s, its leading edge advancing about 1 px a frame at 320×240, against
+/// the far wall for a few dozen rows and against the floor just behind it below. Measured at
+/// 320×240, offline with DVO: F1 0.807 (P 0.955, R 0.787), onset 0, ATE 0.040 m; with the
+/// plain opening (`thin_structure_advance` false) 0.062, never. The recall is 0.96 up to frame
+/// 72 and 0.02–0.06 over the last 17 frames (the true poses the same): there the backward
+/// pass, which starts at the file's last frame, has marked only a strip of the cart (200–640
+/// px), which the body completion does not complete, and the forward pass hardly finds it
+/// (causal with the true poses: F1 0.029): a strip of 1 px a frame is thin together with the one
+/// erased a frame before too. Bounds: the default F1 ≥ 0.75 and onset ≤ 5; the plain opening
+/// below 0.15; while it misses the F1 target, an F1 below it (when a change meets the target
+/// this fails, so that docs/accuracy.md is updated and the scenario joins
+/// [`held_out_scenarios`]).
+#[test]
+fn a_slow_cart_is_lost_in_the_last_frames() {
+    let scenario = Scenario::HeldOutSlowCart;
+    let name = scenario.name();
+    assert_plain_opening_misses(scenario, 0.15);
+    let score = default_mode(scenario);
+    assert_class(&score, name, 0.75, ONSET_TARGET_FRAMES);
+    assert!(
+        score.segmentation.mean_f1 < CLASS_F1_TARGET,
+        "{name}: F1 {:.3}: meets the target now; update docs/accuracy.md and hold it in \
+         held_out_scenarios",
+        score.segmentation.mean_f1
     );
 }

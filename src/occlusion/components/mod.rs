@@ -381,8 +381,8 @@ impl Components {
             updates: Vec::with_capacity(n),
             morph_a: vec![0; n],
             morph_b: vec![0; n],
-            thin_erased: Vec::new(),
-            thin_advance: Vec::new(),
+            thin_erased: Vec::with_capacity(n),
+            thin_advance: Vec::with_capacity(n),
             runs: RunLabelling::new(size.width, size.height),
             stamp_all_sources: false,
         }
