@@ -15,7 +15,7 @@ use occmask::image_buf::Mask;
 use occmask::mcap_io::annotate::AnnotateOptions;
 use occmask::mcap_io::input::detect::TopicOverrides;
 use occmask::mcap_io::input::McapInput;
-use occmask::mcap_io::AtomicOutput;
+use occmask::mcap_io::{AtomicOutput, OutputFile};
 use occmask::occlusion::AppearanceGrowthConfig;
 use occmask::pipeline::{PoseSource, ProcessingMode, ProcessorConfig};
 use occmask::point_cloud::DEFAULT_POINT_STRIDE_PX;
@@ -212,7 +212,7 @@ struct Hooks<'a> {
 struct TrajectoryExport {
     path: PathBuf,
     output: AtomicOutput,
-    file: BufWriter<std::fs::File>,
+    file: BufWriter<OutputFile>,
 }
 
 impl TrajectoryExport {

@@ -1,10 +1,15 @@
 //! [`AtomicOutput`]: write to a temporary file beside the target, rename on success.
 //!
 //! A crash or error never leaves a half-written file under the final name, an existing file
-//! is only replaced with `force`, and the output may not be one of the inputs.
+//! is only replaced with `force`, and the output may not be one of the inputs. The file is
+//! flushed to disk before the rename; [`OutputFile`] starts that flush in the background while
+//! the file is still being written, so that little is left to wait for at the end.
 
 use std::fs::{File, OpenOptions};
+use std::io::{self, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, SyncSender, TrySendError};
+use std::thread::JoinHandle;
 
 use crate::error::{Error, Result};
 
@@ -49,7 +54,7 @@ impl AtomicOutput {
     /// [`Error::InvalidParameter`] when `final_path` is a directory or is one of `inputs`;
     /// [`Error::OutputExists`] when it exists and `force` is false; [`Error::Io`] when the temporary file cannot be created
     /// (e.g. the directory does not exist).
-    pub fn create(final_path: &Path, force: bool, inputs: &[&Path]) -> Result<(Self, File)> {
+    pub fn create(final_path: &Path, force: bool, inputs: &[&Path]) -> Result<(Self, OutputFile)> {
         if final_path.is_dir() {
             return Err(output_error(final_path, "a file path, found a directory"));
         }
@@ -97,7 +102,7 @@ impl AtomicOutput {
                 force,
                 committed: false,
             },
-            file,
+            OutputFile::new(file),
         ))
     }
 
@@ -114,10 +119,12 @@ impl AtomicOutput {
     /// Flushes `file` to disk and renames the temporary file to the final path.
     ///
     /// # Errors
-    /// [`Error::Io`] when syncing or renaming fails; [`Error::OutputExists`] when the
-    /// target appeared meanwhile and `force` is false. The temporary file is removed.
-    pub fn commit(mut self, file: File) -> Result<()> {
-        file.sync_all()
+    /// [`Error::Io`] when syncing (the background flushes included) or renaming fails;
+    /// [`Error::OutputExists`] when the target appeared meanwhile and `force` is false. The
+    /// temporary file is removed.
+    pub fn commit(mut self, file: OutputFile) -> Result<()> {
+        let file = file
+            .into_synced_file()
             .map_err(|e| Error::io("cannot flush output file", &self.temp_path, e))?;
         drop(file);
         if !self.force && self.final_path.exists() {
@@ -130,6 +137,107 @@ impl AtomicOutput {
             .map_err(|e| Error::io("cannot rename temporary output into place", &self.final_path, e))?;
         self.committed = true;
         Ok(())
+    }
+}
+
+/// Bytes written between two background flushes of an [`OutputFile`]: small against the
+/// hundreds of megabytes of a recording, so the flush at the end waits for little, and large
+/// enough that a flush (one `fsync`) per interval costs nothing measurable.
+pub const WRITEBACK_INTERVAL_BYTES: u64 = 16 << 20;
+
+/// The temporary file of an [`AtomicOutput`]. Every [`WRITEBACK_INTERVAL_BYTES`] written, a
+/// background thread (started at the first interval, so small files never start one) flushes
+/// what the file holds to disk while writing goes on: otherwise the whole file sits in the page
+/// cache until [`AtomicOutput::commit`]'s flush, which then waits for all of it.
+#[derive(Debug)]
+pub struct OutputFile {
+    file: File,
+    bytes_since_writeback: u64,
+    writeback: Option<Writeback>,
+}
+
+/// The background flush thread of an [`OutputFile`] and the queue of its requests.
+#[derive(Debug)]
+struct Writeback {
+    request: SyncSender<()>,
+    thread: JoinHandle<io::Result<()>>,
+}
+
+impl Writeback {
+    /// Waits for the thread (after the requests it holds) and returns its first error.
+    fn join(self) -> io::Result<()> {
+        drop(self.request);
+        self.thread
+            .join()
+            .unwrap_or_else(|_| Err(io::Error::other("the output flush thread panicked")))
+    }
+}
+
+impl OutputFile {
+    fn new(file: File) -> Self {
+        Self {
+            file,
+            bytes_since_writeback: 0,
+            writeback: None,
+        }
+    }
+
+    /// Asks the background thread to flush the file (starting it on the first call). A
+    /// request while one is still waiting is dropped: that one will flush these bytes too.
+    fn request_writeback(&mut self) -> io::Result<()> {
+        if self.writeback.is_none() {
+            let file = self.file.try_clone()?;
+            // One request may wait while one runs: the writer never blocks on the disk.
+            let (request, requests) = mpsc::sync_channel::<()>(1);
+            let thread = std::thread::Builder::new()
+                .name("occmask-writeback".into())
+                .spawn(move || {
+                    for () in requests {
+                        file.sync_data()?;
+                    }
+                    Ok(())
+                })?;
+            self.writeback = Some(Writeback { request, thread });
+        }
+        let Some(writeback) = &self.writeback else {
+            return Ok(());
+        };
+        match writeback.request.try_send(()) {
+            Ok(()) | Err(TrySendError::Full(())) => Ok(()),
+            // The thread stopped at a failed flush: report it now.
+            Err(TrySendError::Disconnected(())) => self.writeback.take().map_or(Ok(()), Writeback::join),
+        }
+    }
+
+    /// Waits for the background flushes, then flushes the rest of the file and its metadata.
+    fn into_synced_file(mut self) -> io::Result<File> {
+        if let Some(writeback) = self.writeback.take() {
+            writeback.join()?;
+        }
+        self.file.sync_all()?;
+        Ok(self.file)
+    }
+}
+
+impl Write for OutputFile {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let written = self.file.write(buf)?;
+        self.bytes_since_writeback += written as u64;
+        if self.bytes_since_writeback >= WRITEBACK_INTERVAL_BYTES {
+            self.bytes_since_writeback = 0;
+            self.request_writeback()?;
+        }
+        Ok(written)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl Seek for OutputFile {
+    fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
+        self.file.seek(pos)
     }
 }
 
@@ -162,6 +270,34 @@ mod tests {
         drop(o);
         assert!(!temp.exists());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn large_outputs_are_flushed_in_the_background_and_keep_every_byte() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("big.mcap");
+        let (o, mut f) = AtomicOutput::create(&out, false, &[]).unwrap();
+        let interval = WRITEBACK_INTERVAL_BYTES as usize;
+        let expected: Vec<u8> = (0..interval * 5 / 2).map(|i| (i % 251) as u8).collect();
+        // Written in pieces, with a seek back to patch the start (as an MCAP writer may).
+        f.write_all(&[0xff; 8]).unwrap();
+        for piece in expected[8..].chunks(1 << 20) {
+            f.write_all(piece).unwrap();
+        }
+        assert!(
+            f.writeback.is_some(),
+            "two intervals written: the flush thread runs"
+        );
+        f.seek(SeekFrom::Start(0)).unwrap();
+        f.write_all(&expected[..8]).unwrap();
+        f.seek(SeekFrom::End(0)).unwrap();
+        o.commit(f).unwrap();
+        assert!(std::fs::read(&out).unwrap() == expected);
+
+        let (o, mut f) = AtomicOutput::create(&dir.path().join("small.mcap"), false, &[]).unwrap();
+        f.write_all(&expected[..interval - 1]).unwrap();
+        assert!(f.writeback.is_none(), "below one interval no thread is started");
+        o.commit(f).unwrap();
     }
 
     #[test]
