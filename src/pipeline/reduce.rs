@@ -92,24 +92,19 @@ pub(crate) fn copy_or_enlarge<T: Copy + Default>(image: &Image<T>, full: &mut Im
     }
 }
 
-/// `src` with each pixel repeated `factor` times into `out` (`src.len() × factor` pixels, the
-/// last block cut short when `out` is shorter). The common factor 2 is a plain pair loop: a
-/// `fill` per block is a `memset` call per pixel, which cost more than the rest of emitting a
-/// frame.
+/// `src` with each pixel repeated `factor` times into `out` (`src.len() × factor` pixels). The
+/// common factor 2 is a plain pair loop: a `fill` per block is a `memset` call per pixel, which
+/// cost more than the rest of emitting a frame.
 fn widen_row<T: Copy>(src: &[T], out: &mut [T], factor: usize) {
+    debug_assert_eq!(out.len(), src.len() * factor);
     if factor == 2 {
-        let odd_end = src.get(out.len() / 2).copied();
-        let mut pairs = out.chunks_exact_mut(2);
-        for (pair, &v) in (&mut pairs).zip(src) {
+        for (pair, &v) in out.chunks_exact_mut(2).zip(src) {
             pair[0] = v;
             pair[1] = v;
         }
-        if let (Some(last), Some(v)) = (pairs.into_remainder().first_mut(), odd_end) {
-            *last = v;
-        }
         return;
     }
-    for (block, &v) in out.chunks_mut(factor).zip(src) {
+    for (block, &v) in out.chunks_exact_mut(factor).zip(src) {
         for o in block {
             *o = v;
         }
