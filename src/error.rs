@@ -360,8 +360,10 @@ pub enum Error {
     WriterStopped,
 
     /// The MCAP library reported an error.
-    #[error("MCAP: {0}")]
-    Mcap(#[from] mcap::McapError),
+    // Its causes (the OS error under an I/O error) are part of the message and deliberately
+    // not a `source()` (as for `Io`): the library's own message already names the error kind.
+    #[error("MCAP: {}", with_causes(.0))]
+    Mcap(mcap::McapError),
 
     /// The caller asked to stop (e.g. Ctrl-C); partial output is discarded.
     #[error("interrupted after {done} of {total} items; no output was written")]
@@ -425,6 +427,27 @@ impl Mismatch {
             found: self.found,
         }
     }
+}
+
+impl From<mcap::McapError> for Error {
+    fn from(error: mcap::McapError) -> Self {
+        Error::Mcap(error)
+    }
+}
+
+/// `error`'s message followed by its causes' (`source()` chain), each once.
+fn with_causes(error: &dyn std::error::Error) -> String {
+    let mut message = error.to_string();
+    let mut cause = error.source();
+    while let Some(c) = cause {
+        let text = c.to_string();
+        if !message.ends_with(&text) {
+            message.push_str(": ");
+            message.push_str(&text);
+        }
+        cause = c.source();
+    }
+    message
 }
 
 impl Error {
@@ -772,4 +795,29 @@ pub enum ChunkDamage {
         /// The CRC of the data.
         computed: u32,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_mcap_io_error_names_the_os_error_once() {
+        let os_error = std::io::Error::new(std::io::ErrorKind::StorageFull, "No space left on device");
+        let error = Error::from(mcap::McapError::Io(os_error));
+        let message = error.to_string();
+        assert_eq!(
+            message,
+            "MCAP: I/O error from writing, or reading a compression stream: No space left on device"
+        );
+        assert!(std::error::Error::source(&error).is_none());
+        // As the CLI prints it: the whole chain, each part once.
+        let chained = format!("{:#}", anyhow::Error::new(error).context("processing in.mcap"));
+        assert_eq!(chained, format!("processing in.mcap: {message}"));
+        // A variant without a cause keeps the library's message alone.
+        assert_eq!(
+            Error::from(mcap::McapError::UnexpectedEof).to_string(),
+            format!("MCAP: {}", mcap::McapError::UnexpectedEof)
+        );
+    }
 }
