@@ -164,6 +164,22 @@ struct Writeback {
 }
 
 impl Writeback {
+    /// Starts the thread, on a second handle of `file`.
+    fn start(file: &File) -> io::Result<Self> {
+        let file = file.try_clone()?;
+        // One request may wait while one runs: the writer never blocks on the disk.
+        let (request, requests) = mpsc::sync_channel::<()>(1);
+        let thread = std::thread::Builder::new()
+            .name("occmask-writeback".into())
+            .spawn(move || {
+                for () in requests {
+                    file.sync_data()?;
+                }
+                Ok(())
+            })?;
+        Ok(Self { request, thread })
+    }
+
     /// Waits for the thread (after the requests it holds) and returns its first error.
     fn join(self) -> io::Result<()> {
         drop(self.request);
@@ -185,27 +201,17 @@ impl OutputFile {
     /// Asks the background thread to flush the file (starting it on the first call). A
     /// request while one is still waiting is dropped: that one will flush these bytes too.
     fn request_writeback(&mut self) -> io::Result<()> {
-        if self.writeback.is_none() {
-            let file = self.file.try_clone()?;
-            // One request may wait while one runs: the writer never blocks on the disk.
-            let (request, requests) = mpsc::sync_channel::<()>(1);
-            let thread = std::thread::Builder::new()
-                .name("occmask-writeback".into())
-                .spawn(move || {
-                    for () in requests {
-                        file.sync_data()?;
-                    }
-                    Ok(())
-                })?;
-            self.writeback = Some(Writeback { request, thread });
-        }
-        let Some(writeback) = &self.writeback else {
-            return Ok(());
+        let writeback = match self.writeback.take() {
+            Some(writeback) => writeback,
+            None => Writeback::start(&self.file)?,
         };
         match writeback.request.try_send(()) {
-            Ok(()) | Err(TrySendError::Full(())) => Ok(()),
+            Ok(()) | Err(TrySendError::Full(())) => {
+                self.writeback = Some(writeback);
+                Ok(())
+            }
             // The thread stopped at a failed flush: report it now.
-            Err(TrySendError::Disconnected(())) => self.writeback.take().map_or(Ok(()), Writeback::join),
+            Err(TrySendError::Disconnected(())) => writeback.join(),
         }
     }
 
