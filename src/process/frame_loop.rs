@@ -25,7 +25,7 @@ use super::adapter::{FrameProcessor, ProcessorFactory};
 use super::config::OdometryAnchor;
 use super::config::{ProcessConfig, ProcessHooks};
 use super::pairing::{Pairer, Pairing, Pixels, Queued};
-use super::poses::{anchor_at, FramePose, InputPoses, MAX_UNANCHORED_FRAMES};
+use super::poses::{anchor_at, AnchorStream, FramePose, InputPoses, MAX_UNANCHORED_FRAMES};
 use super::rectify::Publisher;
 use super::report::{AnchorFrame, ProcessReport};
 use super::threads::{FrameWrite, OutputQueue, WriteOp};
@@ -37,8 +37,6 @@ pub(super) struct FrameContext<'a> {
     pub(super) intrinsics: PinholeIntrinsics,
     pub(super) calibration_size: Option<ImageSize>,
     pub(super) poses: &'a InputPoses,
-    /// [`OdometryAnchor`]: the channel and its poses, when the trajectory is anchored.
-    pub(super) anchor_poses: Option<(&'a str, &'a [StampedPose])>,
     /// The samples of `--points`.
     pub(super) point_grid: Option<&'a PointGrid>,
 }
@@ -49,8 +47,14 @@ pub(super) struct FrameLoop {
     pub(super) pending: VecDeque<RawMessage>,
     /// Frames given to the processor whose results have not come back yet (oldest first).
     pub(super) in_flight: VecDeque<InFlight>,
-    /// Results waiting for the first frame the anchor channel covers (oldest first).
+    /// Results waiting for the anchor channel to be read past them ([`AnchorStream::settled`];
+    /// oldest first).
+    pub(super) waiting: VecDeque<(InFlight, FrameResult)>,
+    /// Results the anchor channel does not cover, waiting for the first frame it does (oldest
+    /// first, all before `waiting`).
     pub(super) unanchored: Vec<(InFlight, FrameResult)>,
+    /// [`OdometryAnchor`]: the channel, when the trajectory is anchored.
+    pub(super) anchor: Option<AnchorStream>,
     pub(super) gray: GrayF32,
     pub(super) depth_m: DepthMeters,
     /// Maps masks back to the published colour pixels (the input side of the registration
@@ -99,6 +103,8 @@ impl FrameLoop {
         hooks: &mut dyn ProcessHooks,
         end_of_stream: bool,
     ) -> Result<()> {
+        // The message just read may be the anchor sample that settles the waiting results.
+        self.release(ctx, output, hooks)?;
         while let Some(p) = self.pairer.next(end_of_stream) {
             match p {
                 Pairing::UnpairedColor => self.report.unpaired_color += 1,
@@ -137,7 +143,11 @@ impl FrameLoop {
             u64::MAX
         } else {
             let pairing = self.pairer.oldest_color_log_time().unwrap_or(u64::MAX);
-            let held = self.unanchored.first().map(|(f, _)| f.log_time_ns);
+            let held = self
+                .unanchored
+                .first()
+                .or(self.waiting.front())
+                .map(|(f, _)| f.log_time_ns);
             let processing = held
                 .or(self.in_flight.front().map(|f| f.log_time_ns))
                 .unwrap_or(u64::MAX);
@@ -241,8 +251,8 @@ impl FrameLoop {
         Ok(())
     }
 
-    /// Takes the oldest in-flight frame's result: written at once when the odometry's frame is
-    /// known, else held until the first frame the anchor channel covers.
+    /// Takes the oldest in-flight frame's result and writes it once the anchor channel has been
+    /// read past it ([`Self::release`]).
     fn write_result(
         &mut self,
         ctx: &FrameContext<'_>,
@@ -277,18 +287,39 @@ impl FrameLoop {
                 .transpose()?;
             self.report.timings.rectify_s += back_start.elapsed().as_secs_f64();
         }
-        if self.world_from_odometry.is_none() {
-            match ctx.anchor_poses {
-                None => self.world_from_odometry = Some(Isometry3::identity()),
-                Some((_, poses)) => {
-                    match anchor_at(
-                        poses,
+        self.waiting.push_back((frame, result));
+        self.release(ctx, output, hooks)
+    }
+
+    /// Writes the waiting results that the anchor channel has been read past, in order: the
+    /// first the channel covers anchors the odometry (and releases the uncovered ones before
+    /// it); uncovered ones before that are held, up to [`MAX_UNANCHORED_FRAMES`].
+    fn release(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        hooks: &mut dyn ProcessHooks,
+    ) -> Result<()> {
+        while let Some((frame, _)) = self.waiting.front() {
+            if let Some(anchor) = &self.anchor {
+                if !anchor.settled(frame.timestamp_ns, frame.log_time_ns) {
+                    break;
+                }
+            }
+            let Some((frame, result)) = self.waiting.pop_front() else {
+                break;
+            };
+            if self.world_from_odometry.is_none() {
+                match &self.anchor {
+                    None => self.world_from_odometry = Some(Isometry3::identity()),
+                    Some(anchor) => match anchor_at(
+                        anchor.poses(),
                         ctx.config.max_pose_gap_ns,
                         frame.timestamp_ns,
                         &result.world_from_camera,
                     ) {
-                        Some(anchor) => {
-                            self.world_from_odometry = Some(anchor);
+                        Some(world_from_odometry) => {
+                            self.world_from_odometry = Some(world_from_odometry);
                             self.report.anchor_frame = Some(AnchorFrame {
                                 index: self.report.frames + self.unanchored.len() as u64,
                                 timestamp_ns: frame.timestamp_ns,
@@ -297,25 +328,27 @@ impl FrameLoop {
                         }
                         None if self.unanchored.len() < MAX_UNANCHORED_FRAMES => {
                             self.unanchored.push((frame, result));
-                            return Ok(());
+                            continue;
                         }
                         None => {
                             self.give_up_anchor(ctx);
                             self.flush_unanchored(ctx, output, hooks)?;
                         }
-                    }
+                    },
                 }
             }
+            self.emit(ctx, output, hooks, frame, result)?;
         }
-        self.emit(ctx, output, hooks, frame, result)
+        Ok(())
     }
 
     /// No frame is covered by the anchor channel (within [`MAX_UNANCHORED_FRAMES`]): the first
     /// camera is `world`.
     fn give_up_anchor(&mut self, ctx: &FrameContext<'_>) {
-        if let Some((topic, _)) = ctx.anchor_poses {
+        if let Some(anchor) = &self.anchor {
             self.report.anchor_skipped = Some(format!(
-                "{topic} has no pose within {} ms of the first {} processed frames",
+                "{} has no pose within {} ms of the first {} processed frames",
+                anchor.topic,
                 ctx.config.max_pose_gap_ns / 1_000_000,
                 self.unanchored.len()
             ));
@@ -370,8 +403,8 @@ impl FrameLoop {
             world_from_camera: world_from_odometry * result.world_from_camera,
         };
         // The anchor channel's own pose here, for its path beside the estimated one.
-        let anchor_pose = match (self.world_from_odometry, ctx.anchor_poses) {
-            (Some(_), Some((_, poses))) => interpolate(poses, stamp, ctx.config.max_pose_gap_ns),
+        let anchor_pose = match (self.world_from_odometry, &self.anchor) {
+            (Some(_), Some(anchor)) => interpolate(anchor.poses(), stamp, ctx.config.max_pose_gap_ns),
             _ => None,
         };
         hooks.frame_done(&pose, &result.mask)?;

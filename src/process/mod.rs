@@ -63,12 +63,12 @@ pub use config::{
     DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
 };
 pub use pairing::MAX_QUEUED_IMAGES;
-pub use report::{truncation_metadata, AnchorFrame, LoopTimings, ProcessReport};
+pub use report::{truncation_metadata, AnchorFrame, LoopTimings, ProcessReport, UnreadablePoses};
 pub use threads::{PREFETCH_BYTES, PREFETCH_MAX_MESSAGES, WRITE_QUEUE_BYTES, WRITE_QUEUE_MAX_OPS};
 
 use frame_loop::{FrameContext, FrameLoop};
 use pairing::Pairer;
-use poses::{load_anchor_poses, topic_overrides, InputPoses};
+use poses::{topic_overrides, AnchorStream, InputPoses};
 use queue::byte_queue;
 use rectify::{plan_geometry, Rectifier};
 use streams::{first_calibration, first_image_info, missing_calibration, ImageDecoder};
@@ -152,14 +152,14 @@ pub fn process_file<W: Write + Seek + Send>(
         })
         .transpose()?;
     let input_poses = InputPoses::load(input, &topics, config)?;
-    let (anchor_poses, anchor_skipped) = match load_anchor_poses(input, config) {
-        Ok(poses) => (poses, None),
+    let (anchor, anchor_skipped) = match AnchorStream::open(input, config) {
+        Ok(anchor) => (anchor, None),
         Err(e) if matches!(config.anchor, OdometryAnchor::IfPresent(_)) => (None, Some(e.to_string())),
         Err(e) => return Err(e),
     };
 
     let mut writer = AnnotatedWriter::new(sink, input, &config.annotate)?;
-    if anchor_poses.is_some() {
+    if anchor.is_some() {
         writer.add_anchor_path()?;
     }
     let mut metadata = BTreeMap::from([
@@ -191,8 +191,8 @@ pub fn process_file<W: Write + Seek + Send>(
     if let Some(grid) = &point_grid {
         metadata.insert("points_stride_px".to_owned(), grid.stride_px().to_string());
     }
-    if let Some((topic, _)) = &anchor_poses {
-        metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), topic.clone());
+    if let Some(anchor) = &anchor {
+        metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), anchor.topic.clone());
     }
     if let Some(t) = input.truncation() {
         // Recorded only for damaged inputs, so complete inputs keep their exact bytes.
@@ -212,7 +212,9 @@ pub fn process_file<W: Write + Seek + Send>(
     let read_topics: Option<Vec<String>> = if copy {
         None
     } else {
-        Some(vec![topics.color.topic.clone(), topics.depth.topic.clone()])
+        let mut read = vec![topics.color.topic.clone(), topics.depth.topic.clone()];
+        read.extend(anchor.as_ref().map(|a| a.topic.clone()));
+        Some(read)
     };
 
     // Image buffers go back from the frame loop to the prefetch thread once processed, so
@@ -229,7 +231,9 @@ pub fn process_file<W: Write + Seek + Send>(
         pairer: Pairer::new(config.pair_tolerance_ns),
         pending: VecDeque::new(),
         in_flight: VecDeque::new(),
+        waiting: VecDeque::new(),
         unanchored: Vec::new(),
+        anchor,
         gray: GrayF32::filled(ImageSize::new(0, 0), 0.0),
         depth_m: DepthMeters::filled(ImageSize::new(0, 0), 0.0),
         recycle: (gray_tx, depth_tx),
@@ -260,6 +264,7 @@ pub fn process_file<W: Write + Seek + Send>(
             timings: LoopTimings::default(),
             anchor_skipped,
             anchor_frame: None,
+            anchor_unreadable: None,
             colour_registration: None,
         },
     };
@@ -271,7 +276,6 @@ pub fn process_file<W: Write + Seek + Send>(
         intrinsics: geometry.pipeline.intrinsics,
         calibration_size,
         poses: &input_poses,
-        anchor_poses: anchor_poses.as_ref().map(|(t, p)| (t.as_str(), p.as_slice())),
         point_grid: point_grid.as_ref(),
     };
     // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
@@ -324,6 +328,9 @@ pub fn process_file<W: Write + Seek + Send>(
                 state.report.timings.input_wait_s += wait_start.elapsed().as_secs_f64();
                 let Prefetched { message, image } = item?;
                 read += 1;
+                if let Some(anchor) = &mut state.anchor {
+                    anchor.observe(&message)?;
+                }
                 if hooks.messages_read(read).is_break() {
                     return Err(Error::Interrupted {
                         done: read as usize,
@@ -347,6 +354,9 @@ pub fn process_file<W: Write + Seek + Send>(
                 }
                 state.drain(&ctx, &output, make_processor, hooks, false)?;
             }
+            if let Some(anchor) = &mut state.anchor {
+                anchor.finish();
+            }
             state.drain(&ctx, &output, make_processor, hooks, true)
         };
         let loop_result = frame_loop();
@@ -367,6 +377,7 @@ pub fn process_file<W: Write + Seek + Send>(
     state.report.timings.output_wait_s = output_wait.as_secs_f64();
     state.report.timings.loop_s = loop_s;
     state.report.timings.writer_tail_s = writer_tail_s;
+    state.report.anchor_unreadable = state.anchor.and_then(|a| a.unreadable);
     state.report.copied_messages = writer.copied_messages();
     state.report.new_messages = writer.new_messages();
     let sink = writer.finish()?;

@@ -9,12 +9,13 @@
 use nalgebra::Isometry3;
 
 use crate::error::{Error, PoseRole, Result};
-use crate::mcap_io::input::decode::{decode_poses, read_poses, unsupported_schema, POSE_SCHEMA};
+use crate::mcap_io::input::decode::{decode_poses, unsupported_schema, ChannelType, POSE_SCHEMA};
 use crate::mcap_io::input::detect::{RgbdTopics, TopicOverrides};
-use crate::mcap_io::input::McapInput;
+use crate::mcap_io::input::{McapInput, RawMessage};
 use crate::trajectory::{interpolate, StampedPose};
 
 use super::config::{OdometryAnchor, ProcessConfig};
+use super::report::UnreadablePoses;
 
 /// Results held while no frame is covered by the anchor channel, at most (10 s at 30 Hz): a
 /// pose stream that starts later than this is not used as the anchor (the first camera is
@@ -127,36 +128,153 @@ fn load_external_poses(
     Ok(poses)
 }
 
-/// The poses of the [`OdometryAnchor`] channel, with its topic; `None` when not anchoring.
-pub(super) fn load_anchor_poses(
-    input: &McapInput,
-    config: &ProcessConfig,
-) -> Result<Option<(String, Vec<StampedPose>)>> {
-    if config.processor.pose_source.is_external() {
-        return Ok(None); // external poses are already in their own world frame
-    }
-    let (topic, required) = match &config.anchor {
-        OdometryAnchor::FirstCamera => return Ok(None),
-        OdometryAnchor::IfPresent(t) => (t, false),
-        OdometryAnchor::Required(t) => (t, true),
-    };
-    let poses = read_poses(input, topic).map_err(|e| match e {
-        Error::Decode { .. } if required => Error::AnchorPoses {
-            topic: topic.clone(),
-            error: Box::new(e),
-        },
-        other => other,
-    })?;
-    match (poses.is_empty(), required) {
-        (false, _) => Ok(Some((topic.clone(), poses))),
-        (true, false) => Ok(None),
-        (true, true) => Err(Error::NoPoses {
+/// How far past a frame (in the input's log time) the frame loop reads before it settles the
+/// frame's anchor pose without a later sample: the anchor channel's samples around a frame are
+/// normally logged within milliseconds of it, and a pose stream that stops early then holds
+/// back at most this much of the input's results.
+pub(super) const MAX_ANCHOR_POSE_DELAY_NS: u64 = 1_000_000_000;
+
+/// The [`OdometryAnchor`] channel, read from the same pass over the input as the images (its
+/// messages reach the frame loop among the others), so the input is read and decompressed
+/// once: reading the whole channel before the first frame cost a second pass over every chunk.
+pub(super) struct AnchorStream {
+    /// The channel's topic.
+    pub(super) topic: String,
+    channel_id: u16,
+    channel_type: ChannelType,
+    /// `--anchor-topic` named it: an unreadable message fails the file.
+    required: bool,
+    /// The samples read so far, sorted by stamp, the first read of each stamp.
+    poses: Vec<StampedPose>,
+    /// Log time of the last input message read.
+    read_log_time_ns: u64,
+    /// The input has been read to its end: every sample is in `poses`.
+    complete: bool,
+    /// Messages left out because they did not decode (only when not required).
+    pub(super) unreadable: Option<UnreadablePoses>,
+}
+
+impl AnchorStream {
+    /// The anchor channel, when the configuration anchors and the file has it: its first
+    /// message is decoded here, so a channel that cannot be read is known before any output.
+    /// `Ok(None)` when not anchoring or when an optional channel is absent or empty.
+    ///
+    /// # Errors
+    /// A required channel that is absent or empty ([`Error::NoPoses`]), a channel whose schema
+    /// is not a pose, or whose first message does not decode ([`Error::AnchorPoses`] when
+    /// required); the caller reports these for an optional channel and goes on without it.
+    pub(super) fn open(input: &McapInput, config: &ProcessConfig) -> Result<Option<Self>> {
+        if config.processor.pose_source.is_external() {
+            return Ok(None); // external poses are already in their own world frame
+        }
+        let (topic, required) = match &config.anchor {
+            OdometryAnchor::FirstCamera => return Ok(None),
+            OdometryAnchor::IfPresent(t) => (t, false),
+            OdometryAnchor::Required(t) => (t, true),
+        };
+        let no_poses = || Error::NoPoses {
             path: input.path().to_owned(),
             role: PoseRole::Anchor,
             topic: topic.clone(),
             child_frame: None,
             channels: input.channels().values().map(|c| c.topic.clone()).collect(),
-        }),
+        };
+        let absent = if required { Err(no_poses()) } else { Ok(None) };
+        let Some(channel) = input.channel_by_topic(topic) else {
+            return absent;
+        };
+        let Some(channel_type) = channel.channel_type.filter(|ct| ct.is_pose()) else {
+            return Err(unreadable(
+                topic,
+                required,
+                unsupported_schema(channel, POSE_SCHEMA),
+            ));
+        };
+        let Some(first) = input.first_message(channel.id)? else {
+            return absent;
+        };
+        decode_poses(channel_type, topic, &first.data).map_err(|e| unreadable(topic, required, e))?;
+        // The first message is read again, in its turn, by `observe`.
+        Ok(Some(Self {
+            topic: topic.clone(),
+            channel_id: channel.id,
+            channel_type,
+            required,
+            poses: Vec::new(),
+            read_log_time_ns: 0,
+            complete: false,
+            unreadable: None,
+        }))
+    }
+
+    /// Takes the channel's samples from `message` (any input message, in read order).
+    ///
+    /// # Errors
+    /// A message of a required channel that does not decode ([`Error::AnchorPoses`]); one of an
+    /// optional channel is left out and counted in [`Self::unreadable`].
+    pub(super) fn observe(&mut self, message: &RawMessage) -> Result<()> {
+        self.read_log_time_ns = self.read_log_time_ns.max(message.header.log_time);
+        if message.header.channel_id != self.channel_id {
+            return Ok(());
+        }
+        match decode_poses(self.channel_type, &self.topic, &message.data) {
+            Ok(samples) => {
+                for sample in samples {
+                    let stamp = sample.timestamp_ns;
+                    if let Err(at) = self.poses.binary_search_by_key(&stamp, |p| p.timestamp_ns) {
+                        self.poses.insert(
+                            at,
+                            StampedPose {
+                                timestamp_ns: stamp,
+                                world_from_camera: sample.parent_from_child,
+                            },
+                        );
+                    }
+                }
+                Ok(())
+            }
+            Err(e) if self.required => Err(unreadable(&self.topic, true, e)),
+            Err(e) => {
+                let u = self.unreadable.get_or_insert_with(|| UnreadablePoses {
+                    messages: 0,
+                    first_error: e.to_string(),
+                });
+                u.messages += 1;
+                Ok(())
+            }
+        }
+    }
+
+    /// The input has been read to its end.
+    pub(super) fn finish(&mut self) {
+        self.complete = true;
+    }
+
+    /// Whether the samples read so far give the anchor pose at `stamp_ns` as the whole channel
+    /// would: a sample at or after it has been read (the channel's stamps rise in log-time
+    /// order), the input is read to its end, or it has been read [`MAX_ANCHOR_POSE_DELAY_NS`]
+    /// past the frame's log time.
+    pub(super) fn settled(&self, stamp_ns: u64, log_time_ns: u64) -> bool {
+        self.complete
+            || self.poses.last().is_some_and(|p| p.timestamp_ns >= stamp_ns)
+            || self.read_log_time_ns > log_time_ns.saturating_add(MAX_ANCHOR_POSE_DELAY_NS)
+    }
+
+    /// The samples read so far, sorted by stamp.
+    pub(super) fn poses(&self) -> &[StampedPose] {
+        &self.poses
+    }
+}
+
+/// A decode error of the anchor channel: [`Error::AnchorPoses`] when the channel is required
+/// (the CLI then names `--no-anchor`), else as it is (reported, and the channel not used).
+fn unreadable(topic: &str, required: bool, error: Error) -> Error {
+    match error {
+        Error::Decode { .. } if required => Error::AnchorPoses {
+            topic: topic.to_owned(),
+            error: Box::new(error),
+        },
+        other => other,
     }
 }
 
@@ -170,4 +288,116 @@ pub(super) fn anchor_at(
 ) -> Option<Isometry3<f64>> {
     interpolate(poses, stamp, max_gap_ns)
         .map(|world_from_camera| world_from_camera * odometry_from_camera.inverse())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mcap::records::MessageHeader;
+    use prost::Message;
+
+    const CHANNEL: u16 = 7;
+    const MS: u64 = 1_000_000;
+
+    fn stream() -> AnchorStream {
+        AnchorStream {
+            topic: "/groundtruth/pose".into(),
+            channel_id: CHANNEL,
+            channel_type: ChannelType::classify("foxglove.PoseInFrame", "protobuf").unwrap(),
+            required: false,
+            poses: Vec::new(),
+            read_log_time_ns: 0,
+            complete: false,
+            unreadable: None,
+        }
+    }
+
+    fn message(channel_id: u16, log_time: u64, data: Vec<u8>) -> RawMessage {
+        RawMessage {
+            header: MessageHeader {
+                channel_id,
+                sequence: 0,
+                log_time,
+                publish_time: log_time,
+            },
+            data,
+        }
+    }
+
+    /// A pose message stamped `stamp_ns` at x = `x`, logged at `log_time`.
+    fn pose(stamp_ns: u64, x: f64, log_time: u64) -> RawMessage {
+        let pose = Isometry3::translation(x, 0.0, 0.0);
+        let msg = crate::mcap_io::codec::pose_in_frame(stamp_ns, "world", &pose);
+        message(CHANNEL, log_time, msg.encode_to_vec())
+    }
+
+    #[test]
+    fn a_frame_settles_once_a_sample_at_or_after_it_is_read_or_the_input_moves_on() {
+        let mut s = stream();
+        s.observe(&pose(100 * MS, 0.0, 105 * MS)).unwrap();
+        // A frame at 130 ms (logged at 131 ms): only the sample before it is read.
+        assert!(!s.settled(130 * MS, 131 * MS));
+        // Other channels' messages move the read position, not the samples.
+        s.observe(&message(1, 140 * MS, vec![1, 2, 3])).unwrap();
+        assert!(!s.settled(130 * MS, 131 * MS));
+        s.observe(&pose(133 * MS, 1.0, 141 * MS)).unwrap();
+        assert!(s.settled(130 * MS, 131 * MS));
+        assert!(s.settled(133 * MS, 134 * MS));
+        assert!(!s.settled(150 * MS, 151 * MS));
+        // No later sample: the frame settles once the input is read past its log time by the
+        // bound, or at the end.
+        s.observe(&message(1, 151 * MS + MAX_ANCHOR_POSE_DELAY_NS, Vec::new()))
+            .unwrap();
+        assert!(!s.settled(150 * MS, 151 * MS));
+        s.observe(&message(1, 152 * MS + MAX_ANCHOR_POSE_DELAY_NS, Vec::new()))
+            .unwrap();
+        assert!(s.settled(150 * MS, 151 * MS));
+        assert!(!s.settled(2_000 * MS, 2_001 * MS));
+        s.finish();
+        assert!(s.settled(2_000 * MS, 2_001 * MS));
+    }
+
+    #[test]
+    fn samples_are_kept_in_stamp_order_with_the_first_of_each_stamp_as_a_whole_read_keeps_them() {
+        let mut s = stream();
+        for (stamp, x, log) in [
+            (20, 2.0, 1),
+            (10, 1.0, 2),
+            (20, 9.0, 3),
+            (30, 3.0, 4),
+            (15, 1.5, 5),
+        ] {
+            s.observe(&pose(stamp * MS, x, log * MS)).unwrap();
+        }
+        let got: Vec<(u64, f64)> = s
+            .poses()
+            .iter()
+            .map(|p| (p.timestamp_ns / MS, p.world_from_camera.translation.vector.x))
+            .collect();
+        assert_eq!(got, [(10, 1.0), (15, 1.5), (20, 2.0), (30, 3.0)]);
+    }
+
+    #[test]
+    fn an_unreadable_sample_is_left_out_and_counted_unless_the_channel_is_required() {
+        let mut s = stream();
+        s.observe(&pose(10 * MS, 1.0, MS)).unwrap();
+        let broken = message(CHANNEL, 2 * MS, vec![0xff; 5]);
+        s.observe(&broken).unwrap();
+        s.observe(&broken).unwrap();
+        s.observe(&pose(20 * MS, 2.0, 3 * MS)).unwrap();
+        assert_eq!(s.poses().len(), 2);
+        let u = s.unreadable.as_ref().unwrap();
+        assert_eq!(u.messages, 2);
+        assert!(u.first_error.contains("/groundtruth/pose"), "{}", u.first_error);
+
+        let mut required = AnchorStream {
+            required: true,
+            ..stream()
+        };
+        let e = required.observe(&broken).unwrap_err();
+        assert!(
+            matches!(&e, Error::AnchorPoses { topic, .. } if topic == "/groundtruth/pose"),
+            "{e}"
+        );
+    }
 }

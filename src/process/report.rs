@@ -61,9 +61,21 @@ pub struct ProcessReport {
     /// The frame the odometry was anchored at: the first processed frame the anchor channel
     /// covers (`None` when not anchored).
     pub anchor_frame: Option<AnchorFrame>,
+    /// Messages of an optional [`OdometryAnchor`] channel that did not decode after its first
+    /// did: left out of the anchor, whose other samples are used.
+    pub anchor_unreadable: Option<UnreadablePoses>,
     /// What the offline mode's colour/depth registration check decided (`None` in the causal
     /// mode, with external poses, or with the check off).
     pub colour_registration: Option<ColourRegistration>,
+}
+
+/// Pose messages left out because they did not decode ([`ProcessReport::anchor_unreadable`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnreadablePoses {
+    /// How many.
+    pub messages: u64,
+    /// Why the first of them did not decode.
+    pub first_error: String,
 }
 
 /// Which frame anchored the odometry ([`ProcessReport::anchor_frame`]).

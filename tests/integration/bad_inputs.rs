@@ -136,12 +136,17 @@ fn restamp(from: u64, to: u64) -> Vec<u8> {
 
 /// Rewrites the ground-truth pose of frame 3.
 fn edit_pose(edit: impl Fn(&mut fm::Pose)) -> Vec<u8> {
+    edit_pose_at(3, edit)
+}
+
+/// [`good`] with the ground-truth pose of frame `frame` edited.
+fn edit_pose_at(frame: u64, edit: impl Fn(&mut fm::Pose)) -> Vec<u8> {
     rewrite(&good(), |t, _, data| {
         if t != process_support::GT_TOPIC {
             return Some(data);
         }
         let mut p = fm::PoseInFrame::decode(data.as_slice()).unwrap();
-        if frame_of(occmask::mcap_io::codec::timestamp_ns(p.timestamp.as_ref())) == 3 {
+        if frame_of(occmask::mcap_io::codec::timestamp_ns(p.timestamp.as_ref())) == frame {
             edit(p.pose.as_mut().unwrap());
         }
         Some(p.encode_to_vec())
@@ -494,6 +499,12 @@ fn process_cases() -> Vec<ProcessCase> {
             expect: Expect::Fails(&["in.mcap", "/groundtruth/pose", "unit quaternion"]),
         },
         ProcessCase {
+            name: "ground-truth pose with NaN (--anchor-topic)",
+            bytes: || edit_pose(|p| p.position.as_mut().unwrap().y = f64::NAN),
+            extra: &["--anchor-topic", "/groundtruth/pose"],
+            expect: Expect::Fails(&["in.mcap", "/groundtruth/pose", "NaN", "--no-anchor"]),
+        },
+        ProcessCase {
             name: "colour/depth timestamps going backwards",
             bytes: || restamp(5, 2),
             extra: &[],
@@ -762,14 +773,38 @@ fn eval_bad_inputs() {
     let nan_out = dir.join("nan_out.mcap");
     let out = occmask(&os(&[&"process", &nan_in, &"-o", &nan_out]));
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    // The ground truth cannot anchor the odometry: processed anyway, and said so.
+    // The unreadable sample is left out of the anchor, the others anchor the odometry, and
+    // the warning says which message and why (named with --anchor-topic, the channel is
+    // required, and the same message fails the file: a case of `process_bad_input_corpus`).
     assert!(
         stderr(&out).lines().any(|l| l.starts_with("warning: ")
-            && l.contains("the odometry starts at the first camera")
-            && l.contains("/groundtruth/pose")),
+            && l.contains("1 ground-truth message(s) did not decode")
+            && l.contains("/groundtruth/pose")
+            && l.contains("NaN")),
         "{}",
         stderr(&out)
     );
+    assert!(!stderr(&out).contains("the odometry starts at the first camera"));
+    // A ground truth whose first message does not decode is not used at all.
+    let first_nan = dir.join("first_nan.mcap");
+    std::fs::write(
+        &first_nan,
+        edit_pose_at(0, |p| p.position.as_mut().unwrap().y = f64::NAN),
+    )
+    .unwrap();
+    let first_nan_out = dir.join("first_nan_out.mcap");
+    let out = occmask(&os(&[&"process", &first_nan, &"-o", &first_nan_out]));
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        stderr(&out).lines().any(|l| l.starts_with("warning: ")
+            && l.contains("the odometry starts at the first camera")
+            && l.contains("/groundtruth/pose")
+            && l.contains("NaN")),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_file(&first_nan).unwrap();
+    std::fs::remove_file(&first_nan_out).unwrap();
     // A processed file cut inside its summary (a copy interrupted near the end).
     let full = dir.join("full.mcap");
     let out = occmask(&os(&[&"process", &raw, &"-o", &full, &"-q"]));

@@ -266,3 +266,113 @@ fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
         "{err}"
     );
 }
+
+#[test]
+fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() {
+    use occmask::mcap_io::annotate::{TOPIC_ANCHOR_PATH, TOPIC_ODOMETRY};
+    use occmask::mcap_io::input::decode::read_poses;
+    use occmask::process::ProcessReport;
+
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, spec: &FixtureSpec| -> (Vec<u8>, ProcessReport) {
+        let input_path = dir.path().join(format!("{name}.in.mcap"));
+        std::fs::write(&input_path, fixture_bytes(Flavor::Protobuf, spec)).unwrap();
+        let out_path = dir.path().join(format!("{name}.out.mcap"));
+        let file = BufWriter::new(std::fs::File::create(&out_path).unwrap());
+        let (sink, report) = process_file(
+            &McapInput::open(&input_path).unwrap(),
+            file,
+            &ProcessConfig::default(),
+            &mut test_factory,
+            &mut NoHooks,
+        )
+        .unwrap();
+        sink.into_inner().unwrap().sync_all().unwrap();
+        (std::fs::read(&out_path).unwrap(), report)
+    };
+    let messages = |bytes: &[u8], topic: &str| -> Vec<(u64, Vec<u8>)> {
+        mcap::MessageStream::new(bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .filter(|m| m.channel.topic == topic)
+            .map(|m| (m.log_time, m.data.into_owned()))
+            .collect()
+    };
+    let odometry = |bytes: &[u8]| {
+        read_poses(
+            &McapInput::from_bytes(bytes.to_vec(), Path::new("out.mcap")).unwrap(),
+            TOPIC_ODOMETRY,
+        )
+        .unwrap()
+    };
+    // 2 s of frames: longer than the 1 s the frame loop waits for a sample past a frame.
+    let frames = 60;
+    let (prompt, prompt_report) = run(
+        "prompt",
+        &FixtureSpec {
+            frames,
+            ..FixtureSpec::default()
+        },
+    );
+    // Each pose logged 5 frames after its stamp: every result (the test processor returns it at
+    // once) waits for the sample after it, and is then the same as with the prompt poses.
+    let (late, late_report) = run(
+        "late",
+        &FixtureSpec {
+            frames,
+            ground_truth_delay_ns: 5 * FRAME_NS,
+            ..FixtureSpec::default()
+        },
+    );
+    // A pose stream that stops after frame 20: the frames after it are written once the input
+    // is read 1 s past them, anchored as before and without an anchor pose.
+    let (ended, ended_report) = run(
+        "ended",
+        &FixtureSpec {
+            frames,
+            ground_truth_end_frame: 21,
+            ..FixtureSpec::default()
+        },
+    );
+    for (name, bytes, report) in [
+        ("prompt", &prompt, &prompt_report),
+        ("late", &late, &late_report),
+        ("ended", &ended, &ended_report),
+    ] {
+        assert_eq!(report.frames, frames as u64, "{name}");
+        assert_eq!(report.anchor_frame.map(|a| a.index), Some(0), "{name}");
+        assert!(report.anchor_skipped.is_none(), "{name}");
+        // Every input message is copied, and the output stays in log-time order.
+        let input = McapInput::from_bytes(bytes.clone(), Path::new("out.mcap")).unwrap();
+        let times: Vec<u64> = mcap::MessageStream::new(bytes)
+            .unwrap()
+            .map(|m| m.unwrap().log_time)
+            .collect();
+        assert!(
+            times.windows(2).all(|w| w[0] <= w[1]),
+            "{name}: out of log-time order"
+        );
+        assert_eq!(
+            report.copied_messages + report.new_messages,
+            input.message_count().unwrap(),
+            "{name}"
+        );
+    }
+    let prompt_odometry = odometry(&prompt);
+    assert_eq!(prompt_odometry.len(), frames);
+    for (name, bytes) in [("late", &late), ("ended", &ended)] {
+        let o = odometry(bytes);
+        assert_eq!(o.len(), frames, "{name}");
+        for (a, b) in o.iter().zip(&prompt_odometry) {
+            assert_eq!(a.timestamp_ns, b.timestamp_ns, "{name}");
+            assert_eq!(a.world_from_camera, b.world_from_camera, "{name}");
+        }
+    }
+    // The anchor's path (published once a second, at frames 0 and 30): the same messages with
+    // late samples; without the samples after frame 20, frame 30 has no anchor pose, and only
+    // frame 0's message is written.
+    let prompt_path = messages(&prompt, TOPIC_ANCHOR_PATH);
+    assert_eq!(prompt_path.len(), 2);
+    assert_eq!(messages(&late, TOPIC_ANCHOR_PATH), prompt_path);
+    assert_eq!(messages(&ended, TOPIC_ANCHOR_PATH), prompt_path[..1]);
+}

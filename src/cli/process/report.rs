@@ -64,6 +64,15 @@ pub(super) fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> 
             input.display()
         ));
     }
+    if let Some(u) = &rep.anchor_unreadable {
+        out.push(format!(
+            "{}: {} ground-truth message(s) did not decode and were left out of the odometry's \
+             anchor and /occmask/anchor_path; the first: {}",
+            input.display(),
+            u.messages,
+            u.first_error
+        ));
+    }
     if let Some(r) = rep.colour_registration.filter(|r| !r.registered) {
         out.push(format!(
             "{}: colour not registered to depth (registration score {:.2}, below {:.2}): the \

@@ -51,8 +51,12 @@ pub struct FixtureSpec {
     pub ros_color_encoding: &'static str,
     /// Calibration messages.
     pub with_calibration: bool,
-    /// Ground-truth poses only from this frame on (a pose stream that starts late).
+    /// Ground-truth poses only from this frame on (a pose stream that starts late)...
     pub first_ground_truth_frame: usize,
+    /// ...and before this one (a pose stream that ends early).
+    pub ground_truth_end_frame: usize,
+    /// Ground-truth poses are logged this long after the frame they are stamped with.
+    pub ground_truth_delay_ns: u64,
 }
 
 impl Default for FixtureSpec {
@@ -65,6 +69,8 @@ impl Default for FixtureSpec {
             ros_color_encoding: "bgr8",
             with_calibration: true,
             first_ground_truth_frame: 0,
+            ground_truth_end_frame: usize::MAX,
+            ground_truth_delay_ns: 0,
         }
     }
 }
@@ -506,8 +512,9 @@ pub fn write_fixture<W: Write + Seek>(sink: W, flavor: Flavor, spec: &FixtureSpe
         if spec.with_calibration {
             msgs.push((tc + TRANSPORT_NS, ch.info, info_msg(flavor, spec.size, tc)));
         }
-        if i >= spec.first_ground_truth_frame {
-            msgs.push((tc + TRANSPORT_NS, ch.gt, pose_msg(flavor, tc, &gt_pose(i))));
+        if (spec.first_ground_truth_frame..spec.ground_truth_end_frame).contains(&i) {
+            let logged = tc + TRANSPORT_NS + spec.ground_truth_delay_ns;
+            msgs.push((logged, ch.gt, pose_msg(flavor, tc, &gt_pose(i))));
         }
         if let Some(id) = ch.gt_mask {
             let mask = Mask::from_fn(spec.size, |x, y| if square(i, x, y) { MASK_SET } else { 0 });
