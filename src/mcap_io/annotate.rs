@@ -23,7 +23,7 @@
 //! | [`TOPIC_MASK_ANNOTATIONS`] | `foxglove.ImageAnnotations`, outlines with translucent fill |
 //! | [`TOPIC_ODOMETRY`] | `foxglove.PoseInFrame` in [`FRAME_WORLD`] |
 //! | `/tf` (or [`TOPIC_TF_FALLBACK`]) | `foxglove.FrameTransform` world → [`FRAME_CAMERA_ESTIMATED`] |
-//! | [`TOPIC_PATH`] | `foxglove.PosesInFrame`, throttled trajectory so far |
+//! | [`TOPIC_PATH`] | `foxglove.PosesInFrame`, throttled trajectory so far, and at the last frame |
 //! | [`TOPIC_ANCHOR_PATH`] | `foxglove.PosesInFrame`, the anchor pose channel's trajectory at the frames, throttled (when anchored) |
 //! | [`TOPIC_ACCUMULATION`] | `foxglove.RawImage` `32FC1` accumulation map (opt-in) |
 //! | [`TOPIC_POINTS`] | `foxglove.PointCloud` in [`FRAME_CAMERA_ESTIMATED`], moving points tinted (opt-in; [`crate::point_cloud`]) |
@@ -89,7 +89,8 @@ pub const METADATA_ODOMETRY_ANCHOR: &str = "odometry_anchor_topic";
 pub const METADATA_PROCESSOR_CONFIG: &str = "processor_config";
 
 /// The path is published at most this often (data time): enough for a live-looking
-/// trajectory without one message per frame.
+/// trajectory without one message per frame. The last frame's path is published too
+/// ([`AnnotatedWriter::end_paths`]), so the path reaches the camera at the end.
 pub const PATH_PUBLISH_INTERVAL_NS: u64 = 1_000_000_000;
 /// At most this many poses per path message: when the trajectory grows beyond it, every other
 /// pose is dropped (the stride doubles), so messages stay small and the file grows linearly.
@@ -228,6 +229,9 @@ pub struct AnnotatedWriter<W: Write + Seek> {
     contours: ContourOptions,
     path: PathTrail,
     anchor_path: PathTrail,
+    /// The latest log time written so far ([`Self::end_paths`] writes at it, so log times
+    /// never go backwards).
+    latest_log_time_ns: u64,
     copied_messages: u64,
     new_messages: u64,
     scratch: Vec<u8>,
@@ -244,6 +248,8 @@ struct PathTrail {
     stride: usize,
     frames_seen: usize,
     last_publish_ns: Option<u64>,
+    /// The last frame's stamp and pose, when its path is not published yet.
+    unpublished: Option<(u64, foxglove::messages::Pose)>,
 }
 
 impl Default for PathTrail {
@@ -253,6 +259,7 @@ impl Default for PathTrail {
             stride: 1,
             frames_seen: 0,
             last_publish_ns: None,
+            unpublished: None,
         }
     }
 }
@@ -277,19 +284,31 @@ impl PathTrail {
             .last_publish_ns
             .is_none_or(|last| timestamp_ns >= last.saturating_add(PATH_PUBLISH_INTERVAL_NS));
         if !due {
+            self.unpublished = Some((timestamp_ns, pose));
             return None;
         }
+        Some(self.publish(timestamp_ns, pose))
+    }
+
+    /// The path up to the last frame, when it was not published with that frame.
+    fn end(&mut self) -> Option<PosesInFrame> {
+        let (timestamp_ns, pose) = self.unpublished.take()?;
+        Some(self.publish(timestamp_ns, pose))
+    }
+
+    fn publish(&mut self, timestamp_ns: u64, pose: foxglove::messages::Pose) -> PosesInFrame {
         let mut poses = self.poses.clone();
         // Always end at the current pose, even when the stride skipped it.
         if poses.last() != Some(&pose) {
             poses.push(pose);
         }
         self.last_publish_ns = Some(timestamp_ns);
-        Some(PosesInFrame {
+        self.unpublished = None;
+        PosesInFrame {
             timestamp: Some(codec::timestamp(timestamp_ns)),
             frame_id: FRAME_WORLD.into(),
             poses,
-        })
+        }
     }
 }
 
@@ -379,6 +398,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
             contours: options.contours,
             path: PathTrail::default(),
             anchor_path: PathTrail::default(),
+            latest_log_time_ns: 0,
             copied_messages: 0,
             new_messages: 0,
             scratch: Vec::new(),
@@ -392,6 +412,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
     /// [`Error::Mcap`] on write failure or an unknown channel (sidecar mode).
     pub fn copy_message(&mut self, header: &MessageHeader, data: &[u8]) -> Result<()> {
         self.writer.write_to_known_channel(header, data)?;
+        self.latest_log_time_ns = self.latest_log_time_ns.max(header.log_time);
         self.copied_messages += 1;
         Ok(())
     }
@@ -407,6 +428,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
         *sequence = sequence.wrapping_add(1);
         let data = encoded.unwrap_or(&self.scratch);
         self.writer.write_to_known_channel(&header, data)?;
+        self.latest_log_time_ns = self.latest_log_time_ns.max(log_time_ns);
         self.new_messages += 1;
         Ok(())
     }
@@ -564,6 +586,23 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
     /// New messages written so far.
     pub fn new_messages(&self) -> u64 {
         self.new_messages
+    }
+
+    /// Publishes the paths up to the last frame written, where that frame did not publish
+    /// them (they are published at most every [`PATH_PUBLISH_INTERVAL_NS`]): stamped with that
+    /// frame's time and logged at the latest log time written. Call it after the last frame.
+    ///
+    /// # Errors
+    /// [`Error::Mcap`] on write failure.
+    pub fn end_paths(&mut self) -> Result<()> {
+        let t = self.latest_log_time_ns;
+        if let Some(msg) = self.path.end() {
+            self.write_proto(self.channels.path, t, &msg)?;
+        }
+        if let (Some(id), Some(msg)) = (self.channels.anchor_path, self.anchor_path.end()) {
+            self.write_proto(id, t, &msg)?;
+        }
+        Ok(())
     }
 
     /// Writes the held-back metadata and attachments (input's first, then ours), the summary

@@ -136,6 +136,8 @@ impl FrameLoop {
                 self.give_up_anchor(ctx);
                 self.flush_unanchored(ctx, output, hooks)?;
             }
+            // Before the input messages logged after the last frame, which are copied below.
+            output.send(WriteOp::EndPaths)?;
         }
         // New messages are still to come for frames being paired or processed: input messages
         // after the oldest of them wait.

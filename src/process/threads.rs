@@ -89,6 +89,9 @@ pub(super) enum WriteOp {
     Copy(RawMessage),
     /// One processed frame's new messages.
     Frame(Box<FrameWrite>),
+    /// The last frame is written: publish the paths up to it
+    /// ([`AnnotatedWriter::end_paths`]).
+    EndPaths,
 }
 
 /// Owned [`FrameAnnotation`]: everything the writer thread needs to encode one frame.
@@ -109,6 +112,7 @@ impl WriteOp {
     pub(super) fn bytes(&self) -> usize {
         match self {
             WriteOp::Copy(m) => m.data.len(),
+            WriteOp::EndPaths => 0,
             WriteOp::Frame(f) => {
                 f.mask.as_slice().len()
                     + f.accumulation
@@ -161,6 +165,7 @@ pub(super) fn write_ops<W: Write + Seek>(
                 points: f.points.as_ref(),
                 stats: &f.stats,
             })?,
+            WriteOp::EndPaths => writer.end_paths()?,
         }
     }
     Ok(writer)

@@ -179,9 +179,9 @@ fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
     }
     assert!((oa.ate.unwrap().rmse_m - of.ate.unwrap().rmse_m).abs() < 1e-9);
 
-    // The anchor channel's path, beside the estimated one in the same frame: published once
-    // (12 frames span less than its 1 s interval), ending at the ground truth of the frame it
-    // was published with; no such channel without an anchor.
+    // The anchor channel's path, beside the estimated one in the same frame: published at the
+    // first frame and at the last (12 frames span less than its 1 s interval), each ending at
+    // the ground truth of the frame it was published with; no such channel without an anchor.
     let anchor_paths = |path: &Path| -> Vec<foxglove::messages::PosesInFrame> {
         let bytes = std::fs::read(path).unwrap();
         mcap::MessageStream::new(&bytes)
@@ -192,20 +192,20 @@ fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
             .collect()
     };
     let published = anchor_paths(&anchored);
-    assert_eq!(published.len(), 1);
-    assert_eq!(published[0].frame_id, "world");
-    let stamp = published[0]
-        .timestamp
-        .map(|t| t.sec() as u64 * 1_000_000_000 + u64::from(t.nsec()))
-        .unwrap();
-    let truth_then = interpolate(&truth, stamp, u64::MAX).unwrap();
-    let last = published[0]
-        .poses
-        .last()
-        .and_then(|p| p.position.as_ref())
-        .unwrap();
-    let d = nalgebra::Vector3::new(last.x, last.y, last.z) - truth_then.translation.vector;
-    assert!(d.norm() < 1e-9, "anchor path ends {d:?} from the ground truth");
+    assert_eq!(published.len(), 2);
+    for (message, frame) in published.iter().zip([0, 11]) {
+        assert_eq!(message.frame_id, "world");
+        let stamp = message
+            .timestamp
+            .map(|t| t.sec() as u64 * 1_000_000_000 + u64::from(t.nsec()))
+            .unwrap();
+        assert_eq!(stamp, a[frame].timestamp_ns);
+        assert_eq!(message.poses.len(), frame + 1);
+        let truth_then = interpolate(&truth, stamp, u64::MAX).unwrap();
+        let last = message.poses.last().and_then(|p| p.position.as_ref()).unwrap();
+        let d = nalgebra::Vector3::new(last.x, last.y, last.z) - truth_then.translation.vector;
+        assert!(d.norm() < 1e-9, "anchor path ends {d:?} from the ground truth");
+    }
     assert!(anchor_paths(&unanchored).is_empty());
 
     // A ground truth that starts after the images anchors at the first frame it covers: the
@@ -368,11 +368,20 @@ fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() 
             assert_eq!(a.world_from_camera, b.world_from_camera, "{name}");
         }
     }
-    // The anchor's path (published once a second, at frames 0 and 30): the same messages with
-    // late samples; without the samples after frame 20, frame 30 has no anchor pose, and only
-    // frame 0's message is written.
+    // The anchor's path (published once a second, at frames 0 and 30, and at the last frame):
+    // the same messages with late samples; without the samples after frame 20, frame 30 has
+    // no anchor pose, and the path ends at frame 20's.
+    // (The last is logged after the last message before it, which the late poses move.)
+    let data = |m: Vec<(u64, Vec<u8>)>| -> Vec<Vec<u8>> { m.into_iter().map(|(_, d)| d).collect() };
     let prompt_path = messages(&prompt, TOPIC_ANCHOR_PATH);
-    assert_eq!(prompt_path.len(), 2);
-    assert_eq!(messages(&late, TOPIC_ANCHOR_PATH), prompt_path);
-    assert_eq!(messages(&ended, TOPIC_ANCHOR_PATH), prompt_path[..1]);
+    assert_eq!(prompt_path.len(), 3);
+    assert!(data(messages(&late, TOPIC_ANCHOR_PATH)) == data(prompt_path.clone()));
+    let ended_path = messages(&ended, TOPIC_ANCHOR_PATH);
+    assert_eq!(ended_path.len(), 2);
+    assert!(ended_path[0] == prompt_path[0]);
+    let last: foxglove::messages::PosesInFrame = prost::Message::decode(&ended_path[1].1[..]).unwrap();
+    assert_eq!(last.poses.len(), 21);
+    let end = last.poses[20].position.as_ref().unwrap();
+    let truth_20 = gt_pose(20).translation.vector;
+    assert!((nalgebra::Vector3::new(end.x, end.y, end.z) - truth_20).norm() < 1e-9);
 }

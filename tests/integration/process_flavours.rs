@@ -231,8 +231,8 @@ fn annotated_copy_keeps_every_input_record_byte_identical() {
         }
         assert_eq!(
             out[TOPIC_PATH].len(),
-            1,
-            "12 frames span 0.37 s: one path message"
+            2,
+            "12 frames span 0.37 s: the path at the first frame and at the last"
         );
         assert!(!out.contains_key(TOPIC_ACCUMULATION));
         assert!(!out.contains_key(TOPIC_TF_FALLBACK));
