@@ -36,7 +36,6 @@ pub(super) struct FrameContext<'a> {
     pub(super) topics: &'a RgbdTopics,
     pub(super) intrinsics: PinholeIntrinsics,
     pub(super) calibration_size: Option<ImageSize>,
-    pub(super) poses: &'a InputPoses,
     /// The samples of `--points`.
     pub(super) point_grid: Option<&'a PointGrid>,
 }
@@ -45,6 +44,11 @@ pub(super) struct FrameContext<'a> {
 pub(super) struct FrameLoop {
     pub(super) pairer: Pairer,
     pub(super) pending: VecDeque<RawMessage>,
+    /// Colour–depth pairs waiting for the pose source's channel to be read past them
+    /// ([`InputPoses::settled`]; oldest first).
+    pub(super) unposed: VecDeque<(Queued, Queued)>,
+    /// The pose source's poses from the input.
+    pub(super) poses: InputPoses,
     /// Frames given to the processor whose results have not come back yet (oldest first).
     pub(super) in_flight: VecDeque<InFlight>,
     /// Results waiting for the anchor channel to be read past them ([`AnchorStream::settled`];
@@ -109,11 +113,17 @@ impl FrameLoop {
             match p {
                 Pairing::UnpairedColor => self.report.unpaired_color += 1,
                 Pairing::UnpairedDepth => self.report.unpaired_depth += 1,
-                Pairing::Pair(pair) => {
-                    let (c, d) = *pair;
-                    self.frame(ctx, output, make_processor, hooks, c, d)?
-                }
+                Pairing::Pair(pair) => self.unposed.push_back(*pair),
             }
+        }
+        while let Some((color, _)) = self.unposed.front() {
+            if !self.poses.settled(color.timestamp_ns, color.log_time_ns) {
+                break;
+            }
+            let Some((color, depth)) = self.unposed.pop_front() else {
+                break;
+            };
+            self.frame(ctx, output, make_processor, hooks, color, depth)?;
         }
         if end_of_stream {
             if let Some(mut processor) = self.processor.take() {
@@ -144,7 +154,14 @@ impl FrameLoop {
         let limit = if end_of_stream {
             u64::MAX
         } else {
-            let pairing = self.pairer.oldest_color_log_time().unwrap_or(u64::MAX);
+            let pairing = self
+                .unposed
+                .front()
+                .map(|(color, _)| color.log_time_ns)
+                .into_iter()
+                .chain(self.pairer.oldest_color_log_time())
+                .min()
+                .unwrap_or(u64::MAX);
             let held = self
                 .unanchored
                 .first()
@@ -184,7 +201,7 @@ impl FrameLoop {
             self.report.out_of_order_frames += 1;
             return Ok(());
         }
-        let world_from_marker = match ctx.poses.at(stamp) {
+        let world_from_marker = match self.poses.at(stamp) {
             FramePose::Estimated => None,
             FramePose::Given(pose) => Some(pose),
             FramePose::Outside => {

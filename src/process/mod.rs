@@ -151,7 +151,7 @@ pub fn process_file<W: Write + Seek + Send>(
             )
         })
         .transpose()?;
-    let input_poses = InputPoses::load(input, &topics, config)?;
+    let input_poses = InputPoses::open(input, &topics, config)?;
     let (anchor, anchor_skipped) = match AnchorStream::open(input, config) {
         Ok(anchor) => (anchor, None),
         Err(e) if matches!(config.anchor, OdometryAnchor::IfPresent(_)) => (None, Some(e.to_string())),
@@ -213,6 +213,9 @@ pub fn process_file<W: Write + Seek + Send>(
         None
     } else {
         let mut read = vec![topics.color.topic.clone(), topics.depth.topic.clone()];
+        if config.processor.pose_source.is_external() {
+            read.extend(topics.pose.as_ref().map(|p| p.topic.clone()));
+        }
         read.extend(anchor.as_ref().map(|a| a.topic.clone()));
         Some(read)
     };
@@ -230,6 +233,8 @@ pub fn process_file<W: Write + Seek + Send>(
     let mut state = FrameLoop {
         pairer: Pairer::new(config.pair_tolerance_ns),
         pending: VecDeque::new(),
+        unposed: VecDeque::new(),
+        poses: input_poses,
         in_flight: VecDeque::new(),
         waiting: VecDeque::new(),
         unanchored: Vec::new(),
@@ -275,7 +280,6 @@ pub fn process_file<W: Write + Seek + Send>(
         // into a magnified K; see rectify::inscribed_pinhole).
         intrinsics: geometry.pipeline.intrinsics,
         calibration_size,
-        poses: &input_poses,
         point_grid: point_grid.as_ref(),
     };
     // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
@@ -328,6 +332,7 @@ pub fn process_file<W: Write + Seek + Send>(
                 state.report.timings.input_wait_s += wait_start.elapsed().as_secs_f64();
                 let Prefetched { message, image } = item?;
                 read += 1;
+                state.poses.observe(&message)?;
                 if let Some(anchor) = &mut state.anchor {
                     anchor.observe(&message)?;
                 }
@@ -354,6 +359,7 @@ pub fn process_file<W: Write + Seek + Send>(
                 }
                 state.drain(&ctx, &output, make_processor, hooks, false)?;
             }
+            state.poses.finish(input.path())?;
             if let Some(anchor) = &mut state.anchor {
                 anchor.finish();
             }

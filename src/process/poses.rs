@@ -6,6 +6,8 @@
 //! [`ProcessConfig::processor`]); what a source needs from the input file is here, so a new
 //! source is a change to the pipeline, this module and the CLI's argument.
 
+use std::path::Path;
+
 use nalgebra::Isometry3;
 
 use crate::error::{Error, PoseRole, Result};
@@ -31,11 +33,24 @@ pub(super) fn topic_overrides(config: &ProcessConfig) -> TopicOverrides {
     topics
 }
 
-/// The poses that come with the input for the pose source, per frame.
+/// The poses that come with the input for the pose source, per frame: for external poses, the
+/// pose channel's samples, read from the same pass over the input as the images
+/// ([`StreamedPoses`]; a frame waits until the channel is read past it).
 pub(super) struct InputPoses {
-    /// External poses in time order (`None`: the pose source estimates them).
-    external: Option<Vec<StampedPose>>,
+    /// `None`: the pose source estimates the poses.
+    external: Option<ExternalPoses>,
     max_gap_ns: u64,
+}
+
+/// The pose channel of an external pose source.
+struct ExternalPoses {
+    topic: String,
+    channel_id: u16,
+    channel_type: ChannelType,
+    /// The child frame whose poses are used ([`ProcessConfig::pose_child_frame`], else the
+    /// first seen).
+    child: Option<String>,
+    samples: StreamedPoses,
 }
 
 /// The pose of one frame from [`InputPoses::at`].
@@ -49,13 +64,36 @@ pub(super) enum FramePose {
 }
 
 impl InputPoses {
-    /// Reads what the pose source needs (the whole pose stream for external poses).
+    /// What the pose source needs: for external poses, the pose channel of `topics`, whose
+    /// first message is decoded here so that a channel that cannot be used fails before any
+    /// output.
     ///
     /// # Errors
-    /// As [`load_external_poses`].
-    pub(super) fn load(input: &McapInput, topics: &RgbdTopics, config: &ProcessConfig) -> Result<Self> {
+    /// No pose topic ([`Error::MissingPoseTopic`]), a schema that is not a pose, an empty
+    /// channel ([`Error::NoPoses`]) or a first message that does not decode.
+    pub(super) fn open(input: &McapInput, topics: &RgbdTopics, config: &ProcessConfig) -> Result<Self> {
         let external = if config.processor.pose_source.is_external() {
-            Some(load_external_poses(input, topics, config)?)
+            let Some(channel) = &topics.pose else {
+                return Err(Error::MissingPoseTopic);
+            };
+            let channel_type = channel
+                .channel_type
+                .ok_or_else(|| unsupported_schema(channel, POSE_SCHEMA))?;
+            let external = ExternalPoses {
+                topic: channel.topic.clone(),
+                channel_id: channel.id,
+                channel_type,
+                child: config.pose_child_frame.clone(),
+                samples: StreamedPoses::default(),
+            };
+            match input.first_message(channel.id)? {
+                // Decoded here for its errors; read again, in its turn, by `observe`.
+                Some(first) => {
+                    decode_poses(channel_type, &channel.topic, &first.data)?;
+                }
+                None => return Err(external.no_poses(input.path())),
+            }
+            Some(external)
         } else {
             None
         };
@@ -65,78 +103,131 @@ impl InputPoses {
         })
     }
 
+    /// Takes the pose channel's samples from `message` (any input message, in read order).
+    ///
+    /// # Errors
+    /// A pose message that does not decode.
+    pub(super) fn observe(&mut self, message: &RawMessage) -> Result<()> {
+        let Some(e) = &mut self.external else {
+            return Ok(());
+        };
+        e.samples.read(message.header.log_time);
+        if message.header.channel_id != e.channel_id {
+            return Ok(());
+        }
+        for sample in decode_poses(e.channel_type, &e.topic, &message.data)? {
+            if let Some(c) = &sample.child_frame {
+                if c == crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED {
+                    continue;
+                }
+                match &e.child {
+                    None => e.child = Some(c.clone()),
+                    Some(wanted) if wanted != c => continue,
+                    Some(_) => {}
+                }
+            }
+            e.samples.insert(sample.timestamp_ns, sample.parent_from_child);
+        }
+        Ok(())
+    }
+
+    /// The input has been read to its end.
+    ///
+    /// # Errors
+    /// [`Error::NoPoses`] when the channel had no pose of the child frame.
+    pub(super) fn finish(&mut self, input_path: &Path) -> Result<()> {
+        match &mut self.external {
+            Some(e) if e.samples.poses.is_empty() => Err(e.no_poses(input_path)),
+            Some(e) => {
+                e.samples.complete = true;
+                Ok(())
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// Whether the pose of a frame stamped `stamp_ns` and logged at `log_time_ns` is known
+    /// ([`StreamedPoses::settled`]; always, when the pose source estimates it).
+    pub(super) fn settled(&self, stamp_ns: u64, log_time_ns: u64) -> bool {
+        self.external
+            .as_ref()
+            .is_none_or(|e| e.samples.settled(stamp_ns, log_time_ns))
+    }
+
     /// The pose for a frame stamped `stamp`: interpolated from samples at most
     /// [`ProcessConfig::max_pose_gap_ns`] apart.
     pub(super) fn at(&self, stamp: u64) -> FramePose {
         match &self.external {
             None => FramePose::Estimated,
-            Some(poses) => {
-                interpolate(poses, stamp, self.max_gap_ns).map_or(FramePose::Outside, FramePose::Given)
-            }
+            Some(e) => interpolate(&e.samples.poses, stamp, self.max_gap_ns)
+                .map_or(FramePose::Outside, FramePose::Given),
         }
     }
 }
 
-/// The external poses of [`RgbdTopics::pose`] for [`ProcessConfig::pose_child_frame`] (else
-/// the first child frame seen), sorted and deduplicated by stamp.
-///
-/// # Errors
-/// No pose topic, an undecodable pose message, or no poses.
-fn load_external_poses(
-    input: &McapInput,
-    topics: &RgbdTopics,
-    config: &ProcessConfig,
-) -> Result<Vec<StampedPose>> {
-    let Some(channel) = &topics.pose else {
-        return Err(Error::MissingPoseTopic);
-    };
-    let ct = channel
-        .channel_type
-        .ok_or_else(|| unsupported_schema(channel, POSE_SCHEMA))?;
-    let mut child = config.pose_child_frame.clone();
-    let mut poses = Vec::new();
-    input.for_each_message(Some(std::slice::from_ref(&channel.topic)), None, |m| {
-        for sample in decode_poses(ct, &channel.topic, &m.data)? {
-            if let Some(c) = &sample.child_frame {
-                if c == crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED {
-                    continue;
-                }
-                match &child {
-                    None => child = Some(c.clone()),
-                    Some(wanted) if wanted != c => continue,
-                    Some(_) => {}
-                }
-            }
-            poses.push(StampedPose {
-                timestamp_ns: sample.timestamp_ns,
-                world_from_camera: sample.parent_from_child,
-            });
-        }
-        Ok(true)
-    })?;
-    poses.sort_by_key(|p| p.timestamp_ns);
-    poses.dedup_by_key(|p| p.timestamp_ns);
-    if poses.is_empty() {
-        return Err(Error::NoPoses {
-            path: input.path().to_owned(),
+impl ExternalPoses {
+    fn no_poses(&self, input_path: &Path) -> Error {
+        Error::NoPoses {
+            path: input_path.to_owned(),
             role: PoseRole::External,
-            topic: channel.topic.clone(),
-            child_frame: child,
+            topic: self.topic.clone(),
+            child_frame: self.child.clone(),
             channels: Vec::new(),
-        });
+        }
     }
-    Ok(poses)
+}
+
+/// A pose channel's samples, taken from the input's messages as the frame loop reads them, so
+/// the input is read and decompressed once (reading a whole channel before the first frame
+/// cost a second pass over every chunk, 5 % of the CPU on the Bonn window).
+#[derive(Default)]
+struct StreamedPoses {
+    /// The samples read so far, sorted by stamp, the first read of each stamp (as a sort and
+    /// deduplication of the whole channel keeps them).
+    poses: Vec<StampedPose>,
+    /// Log time of the last input message read.
+    read_log_time_ns: u64,
+    /// The input has been read to its end: every sample is in `poses`.
+    complete: bool,
+}
+
+impl StreamedPoses {
+    fn read(&mut self, log_time_ns: u64) {
+        self.read_log_time_ns = self.read_log_time_ns.max(log_time_ns);
+    }
+
+    fn insert(&mut self, timestamp_ns: u64, world_from_camera: Isometry3<f64>) {
+        if let Err(at) = self.poses.binary_search_by_key(&timestamp_ns, |p| p.timestamp_ns) {
+            self.poses.insert(
+                at,
+                StampedPose {
+                    timestamp_ns,
+                    world_from_camera,
+                },
+            );
+        }
+    }
+
+    /// Whether the samples read so far give the pose at `stamp_ns` as the whole channel would:
+    /// a sample at or after it has been read (the channel's stamps rise in log-time order), the
+    /// input is read to its end, or it has been read [`MAX_POSE_DELAY_NS`] past the frame's
+    /// log time.
+    fn settled(&self, stamp_ns: u64, log_time_ns: u64) -> bool {
+        self.complete
+            || self.poses.last().is_some_and(|p| p.timestamp_ns >= stamp_ns)
+            || self.read_log_time_ns > log_time_ns.saturating_add(MAX_POSE_DELAY_NS)
+    }
 }
 
 /// How far past a frame (in the input's log time) the frame loop reads before it settles the
-/// frame's anchor pose without a later sample: the anchor channel's samples around a frame are
-/// normally logged within milliseconds of it, and a pose stream that stops early then holds
-/// back at most this much of the input's results.
-pub(super) const MAX_ANCHOR_POSE_DELAY_NS: u64 = 1_000_000_000;
+/// frame's pose without a later sample: a pose channel's samples around a frame are normally
+/// logged within milliseconds of it, and a pose stream that stops early then holds back at most
+/// this much of the input (decoded frames waiting for an external pose, results waiting for
+/// the anchor's).
+pub(super) const MAX_POSE_DELAY_NS: u64 = 1_000_000_000;
 
-/// The [`OdometryAnchor`] channel, read from the same pass over the input as the images (its
-/// messages reach the frame loop among the others), so the input is read and decompressed
-/// once: reading the whole channel before the first frame cost a second pass over every chunk.
+/// The [`OdometryAnchor`] channel, read from the same pass over the input as the images
+/// ([`StreamedPoses`]).
 pub(super) struct AnchorStream {
     /// The channel's topic.
     pub(super) topic: String,
@@ -144,12 +235,7 @@ pub(super) struct AnchorStream {
     channel_type: ChannelType,
     /// `--anchor-topic` named it: an unreadable message fails the file.
     required: bool,
-    /// The samples read so far, sorted by stamp, the first read of each stamp.
-    poses: Vec<StampedPose>,
-    /// Log time of the last input message read.
-    read_log_time_ns: u64,
-    /// The input has been read to its end: every sample is in `poses`.
-    complete: bool,
+    samples: StreamedPoses,
     /// Messages left out because they did not decode (only when not required).
     pub(super) unreadable: Option<UnreadablePoses>,
 }
@@ -200,9 +286,7 @@ impl AnchorStream {
             channel_id: channel.id,
             channel_type,
             required,
-            poses: Vec::new(),
-            read_log_time_ns: 0,
-            complete: false,
+            samples: StreamedPoses::default(),
             unreadable: None,
         }))
     }
@@ -213,23 +297,14 @@ impl AnchorStream {
     /// A message of a required channel that does not decode ([`Error::AnchorPoses`]); one of an
     /// optional channel is left out and counted in [`Self::unreadable`].
     pub(super) fn observe(&mut self, message: &RawMessage) -> Result<()> {
-        self.read_log_time_ns = self.read_log_time_ns.max(message.header.log_time);
+        self.samples.read(message.header.log_time);
         if message.header.channel_id != self.channel_id {
             return Ok(());
         }
         match decode_poses(self.channel_type, &self.topic, &message.data) {
             Ok(samples) => {
                 for sample in samples {
-                    let stamp = sample.timestamp_ns;
-                    if let Err(at) = self.poses.binary_search_by_key(&stamp, |p| p.timestamp_ns) {
-                        self.poses.insert(
-                            at,
-                            StampedPose {
-                                timestamp_ns: stamp,
-                                world_from_camera: sample.parent_from_child,
-                            },
-                        );
-                    }
+                    self.samples.insert(sample.timestamp_ns, sample.parent_from_child);
                 }
                 Ok(())
             }
@@ -247,22 +322,18 @@ impl AnchorStream {
 
     /// The input has been read to its end.
     pub(super) fn finish(&mut self) {
-        self.complete = true;
+        self.samples.complete = true;
     }
 
-    /// Whether the samples read so far give the anchor pose at `stamp_ns` as the whole channel
-    /// would: a sample at or after it has been read (the channel's stamps rise in log-time
-    /// order), the input is read to its end, or it has been read [`MAX_ANCHOR_POSE_DELAY_NS`]
-    /// past the frame's log time.
+    /// Whether the anchor pose of a frame stamped `stamp_ns` and logged at `log_time_ns` is
+    /// known ([`StreamedPoses::settled`]).
     pub(super) fn settled(&self, stamp_ns: u64, log_time_ns: u64) -> bool {
-        self.complete
-            || self.poses.last().is_some_and(|p| p.timestamp_ns >= stamp_ns)
-            || self.read_log_time_ns > log_time_ns.saturating_add(MAX_ANCHOR_POSE_DELAY_NS)
+        self.samples.settled(stamp_ns, log_time_ns)
     }
 
     /// The samples read so far, sorted by stamp.
     pub(super) fn poses(&self) -> &[StampedPose] {
-        &self.poses
+        &self.samples.poses
     }
 }
 
@@ -305,9 +376,7 @@ mod tests {
             channel_id: CHANNEL,
             channel_type: ChannelType::classify("foxglove.PoseInFrame", "protobuf").unwrap(),
             required: false,
-            poses: Vec::new(),
-            read_log_time_ns: 0,
-            complete: false,
+            samples: StreamedPoses::default(),
             unreadable: None,
         }
     }
@@ -346,10 +415,10 @@ mod tests {
         assert!(!s.settled(150 * MS, 151 * MS));
         // No later sample: the frame settles once the input is read past its log time by the
         // bound, or at the end.
-        s.observe(&message(1, 151 * MS + MAX_ANCHOR_POSE_DELAY_NS, Vec::new()))
+        s.observe(&message(1, 151 * MS + MAX_POSE_DELAY_NS, Vec::new()))
             .unwrap();
         assert!(!s.settled(150 * MS, 151 * MS));
-        s.observe(&message(1, 152 * MS + MAX_ANCHOR_POSE_DELAY_NS, Vec::new()))
+        s.observe(&message(1, 152 * MS + MAX_POSE_DELAY_NS, Vec::new()))
             .unwrap();
         assert!(s.settled(150 * MS, 151 * MS));
         assert!(!s.settled(2_000 * MS, 2_001 * MS));

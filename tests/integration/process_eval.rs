@@ -29,10 +29,33 @@ fn processed(dir: &Path, config: &ProcessConfig, name: &str) -> PathBuf {
     out_path
 }
 
-#[test]
-fn scores_match_hand_computed_values() {
-    let dir = tempfile::tempdir().unwrap();
-    let config = ProcessConfig {
+/// The fixture `spec` written to `DIR/NAME.in.mcap` and processed with `config`: the output's
+/// bytes and the report.
+fn fixture_processed(
+    dir: &Path,
+    name: &str,
+    spec: &FixtureSpec,
+    config: &ProcessConfig,
+) -> (Vec<u8>, occmask::process::ProcessReport) {
+    let input_path = dir.join(format!("{name}.in.mcap"));
+    std::fs::write(&input_path, fixture_bytes(Flavor::Protobuf, spec)).unwrap();
+    let out_path = dir.join(format!("{name}.out.mcap"));
+    let file = BufWriter::new(std::fs::File::create(&out_path).unwrap());
+    let (sink, report) = process_file(
+        &McapInput::open(&input_path).unwrap(),
+        file,
+        config,
+        &mut test_factory,
+        &mut NoHooks,
+    )
+    .unwrap();
+    sink.into_inner().unwrap().sync_all().unwrap();
+    (std::fs::read(&out_path).unwrap(), report)
+}
+
+/// External poses from the ground-truth channel.
+fn external_poses() -> ProcessConfig {
+    ProcessConfig {
         processor: occmask::pipeline::ProcessorConfig {
             pose_source: occmask::pipeline::PoseSource::External {
                 camera_from_marker: None,
@@ -44,8 +67,13 @@ fn scores_match_hand_computed_values() {
             ..Default::default()
         },
         ..Default::default()
-    };
-    let out = processed(dir.path(), &config, "ext");
+    }
+}
+
+#[test]
+fn scores_match_hand_computed_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = processed(dir.path(), &external_poses(), "ext");
     let report = evaluate(&out).unwrap();
     assert_eq!(report.estimated_masks, 12);
     let segmentation = report.segmentation.unwrap();
@@ -271,25 +299,9 @@ fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
 fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() {
     use occmask::mcap_io::annotate::{TOPIC_ANCHOR_PATH, TOPIC_ODOMETRY};
     use occmask::mcap_io::input::decode::read_poses;
-    use occmask::process::ProcessReport;
-
     let dir = tempfile::tempdir().unwrap();
-    let run = |name: &str, spec: &FixtureSpec| -> (Vec<u8>, ProcessReport) {
-        let input_path = dir.path().join(format!("{name}.in.mcap"));
-        std::fs::write(&input_path, fixture_bytes(Flavor::Protobuf, spec)).unwrap();
-        let out_path = dir.path().join(format!("{name}.out.mcap"));
-        let file = BufWriter::new(std::fs::File::create(&out_path).unwrap());
-        let (sink, report) = process_file(
-            &McapInput::open(&input_path).unwrap(),
-            file,
-            &ProcessConfig::default(),
-            &mut test_factory,
-            &mut NoHooks,
-        )
-        .unwrap();
-        sink.into_inner().unwrap().sync_all().unwrap();
-        (std::fs::read(&out_path).unwrap(), report)
-    };
+    let run =
+        |name: &str, spec: &FixtureSpec| fixture_processed(dir.path(), name, spec, &ProcessConfig::default());
     let messages = |bytes: &[u8], topic: &str| -> Vec<(u64, Vec<u8>)> {
         mcap::MessageStream::new(bytes)
             .unwrap()
@@ -384,4 +396,60 @@ fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() 
     let end = last.poses[20].position.as_ref().unwrap();
     let truth_20 = gt_pose(20).translation.vector;
     assert!((nalgebra::Vector3::new(end.x, end.y, end.z) - truth_20).norm() < 1e-9);
+}
+
+#[test]
+fn external_poses_are_read_with_the_images_and_frames_wait_for_late_samples() {
+    use occmask::mcap_io::annotate::TOPIC_ODOMETRY;
+    use occmask::mcap_io::input::decode::read_poses;
+
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, spec: &FixtureSpec| fixture_processed(dir.path(), name, spec, &external_poses());
+    let odometry = |bytes: &[u8]| {
+        read_poses(
+            &McapInput::from_bytes(bytes.to_vec(), Path::new("out.mcap")).unwrap(),
+            TOPIC_ODOMETRY,
+        )
+        .unwrap()
+    };
+    let frames = 60;
+    let (prompt, prompt_report) = run(
+        "prompt",
+        &FixtureSpec {
+            frames,
+            ..FixtureSpec::default()
+        },
+    );
+    // Each pose logged 5 frames after its stamp: every frame waits for the sample after it
+    // before it is processed, and gets the same pose.
+    let (late, late_report) = run(
+        "late",
+        &FixtureSpec {
+            frames,
+            ground_truth_delay_ns: 5 * FRAME_NS,
+            ..FixtureSpec::default()
+        },
+    );
+    assert_eq!((prompt_report.frames, late_report.frames), (60, 60));
+    assert_eq!(late_report.outside_pose_stream, 0);
+    let (p, l) = (odometry(&prompt), odometry(&late));
+    assert_eq!(p.len(), frames);
+    for (i, (a, b)) in p.iter().zip(&l).enumerate() {
+        assert_eq!(a.timestamp_ns, b.timestamp_ns);
+        assert_eq!(a.world_from_camera, b.world_from_camera, "frame {i}");
+        let d = a.world_from_camera.inverse() * gt_pose(i);
+        assert!(d.translation.vector.norm() < 1e-9, "frame {i}");
+    }
+    // A pose stream that stops after frame 20: the frames after it are processed once the
+    // input is read 1 s past them, as outside the pose stream (not processed).
+    let (ended, ended_report) = run(
+        "ended",
+        &FixtureSpec {
+            frames,
+            ground_truth_end_frame: 21,
+            ..FixtureSpec::default()
+        },
+    );
+    assert_eq!((ended_report.frames, ended_report.outside_pose_stream), (21, 39));
+    assert_eq!(odometry(&ended)[..], p[..21]);
 }
