@@ -295,68 +295,41 @@ fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
     );
 }
 
-#[test]
-fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() {
-    use occmask::mcap_io::annotate::{TOPIC_ANCHOR_PATH, TOPIC_ODOMETRY};
-    use occmask::mcap_io::input::decode::read_poses;
-    let dir = tempfile::tempdir().unwrap();
-    let run =
-        |name: &str, spec: &FixtureSpec| fixture_processed(dir.path(), name, spec, &ProcessConfig::default());
-    let messages = |bytes: &[u8], topic: &str| -> Vec<(u64, Vec<u8>)> {
-        mcap::MessageStream::new(bytes)
-            .unwrap()
-            .map(Result::unwrap)
-            .filter(|m| m.channel.topic == topic)
-            .map(|m| (m.log_time, m.data.into_owned()))
-            .collect()
-    };
-    let odometry = |bytes: &[u8]| {
-        read_poses(
-            &McapInput::from_bytes(bytes.to_vec(), Path::new("out.mcap")).unwrap(),
-            TOPIC_ODOMETRY,
-        )
-        .unwrap()
-    };
-    // 2 s of frames: longer than the 1 s the frame loop waits for a sample past a frame.
-    let frames = 60;
-    let (prompt, prompt_report) = run(
-        "prompt",
-        &FixtureSpec {
-            frames,
+/// Frames of the pose-timing fixtures: 2 s, longer than the 1 s a frame waits for a sample
+/// past it.
+const TIMING_FRAMES: usize = 60;
+
+/// The ground truth logged on time, logged 5 frames after its stamps (every frame, or its
+/// result, then waits for the sample after it), and stopping after frame 20 (the frames after
+/// it wait until the input is read 1 s past them): each fixture processed with `config`, with
+/// its output's odometry.
+fn pose_timings(
+    dir: &Path,
+    config: &ProcessConfig,
+) -> [(
+    Vec<u8>,
+    occmask::process::ProcessReport,
+    Vec<occmask::trajectory::StampedPose>,
+); 3] {
+    let specs = [
+        ("prompt", 0, usize::MAX),
+        ("late", 5 * FRAME_NS, usize::MAX),
+        ("ended", 0, 21),
+    ];
+    specs.map(|(name, delay, end)| {
+        let spec = FixtureSpec {
+            frames: TIMING_FRAMES,
+            ground_truth_delay_ns: delay,
+            ground_truth_end_frame: end,
             ..FixtureSpec::default()
-        },
-    );
-    // Each pose logged 5 frames after its stamp: every result (the test processor returns it at
-    // once) waits for the sample after it, and is then the same as with the prompt poses.
-    let (late, late_report) = run(
-        "late",
-        &FixtureSpec {
-            frames,
-            ground_truth_delay_ns: 5 * FRAME_NS,
-            ..FixtureSpec::default()
-        },
-    );
-    // A pose stream that stops after frame 20: the frames after it are written once the input
-    // is read 1 s past them, anchored as before and without an anchor pose.
-    let (ended, ended_report) = run(
-        "ended",
-        &FixtureSpec {
-            frames,
-            ground_truth_end_frame: 21,
-            ..FixtureSpec::default()
-        },
-    );
-    for (name, bytes, report) in [
-        ("prompt", &prompt, &prompt_report),
-        ("late", &late, &late_report),
-        ("ended", &ended, &ended_report),
-    ] {
-        assert_eq!(report.frames, frames as u64, "{name}");
-        assert_eq!(report.anchor_frame.map(|a| a.index), Some(0), "{name}");
-        assert!(report.anchor_skipped.is_none(), "{name}");
-        // Every input message is copied, and the output stays in log-time order.
+        };
+        let (bytes, report) = fixture_processed(dir, name, &spec, config);
         let input = McapInput::from_bytes(bytes.clone(), Path::new("out.mcap")).unwrap();
-        let times: Vec<u64> = mcap::MessageStream::new(bytes)
+        let odometry =
+            occmask::mcap_io::input::decode::read_poses(&input, occmask::mcap_io::annotate::TOPIC_ODOMETRY)
+                .unwrap();
+        // Every input message is copied, and the output stays in log-time order.
+        let times: Vec<u64> = mcap::MessageStream::new(&bytes)
             .unwrap()
             .map(|m| m.unwrap().log_time)
             .collect();
@@ -369,29 +342,42 @@ fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() 
             input.message_count().unwrap(),
             "{name}"
         );
-    }
-    let prompt_odometry = odometry(&prompt);
-    assert_eq!(prompt_odometry.len(), frames);
-    for (name, bytes) in [("late", &late), ("ended", &ended)] {
-        let o = odometry(bytes);
-        assert_eq!(o.len(), frames, "{name}");
-        for (a, b) in o.iter().zip(&prompt_odometry) {
-            assert_eq!(a.timestamp_ns, b.timestamp_ns, "{name}");
-            assert_eq!(a.world_from_camera, b.world_from_camera, "{name}");
-        }
+        (bytes, report, odometry)
+    })
+}
+
+#[test]
+fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() {
+    use occmask::mcap_io::annotate::TOPIC_ANCHOR_PATH;
+
+    let dir = tempfile::tempdir().unwrap();
+    let [prompt, late, ended] = pose_timings(dir.path(), &ProcessConfig::default());
+    // Every frame is written, anchored at frame 0, with the same odometry.
+    for (name, (_, report, odometry)) in [("prompt", &prompt), ("late", &late), ("ended", &ended)] {
+        assert_eq!(report.frames, TIMING_FRAMES as u64, "{name}");
+        assert_eq!(report.anchor_frame.map(|a| a.index), Some(0), "{name}");
+        assert!(report.anchor_skipped.is_none(), "{name}");
+        assert_eq!(odometry, &prompt.2, "{name}");
     }
     // The anchor's path (published once a second, at frames 0 and 30, and at the last frame):
-    // the same messages with late samples; without the samples after frame 20, frame 30 has
-    // no anchor pose, and the path ends at frame 20's.
-    // (The last is logged after the last message before it, which the late poses move.)
-    let data = |m: Vec<(u64, Vec<u8>)>| -> Vec<Vec<u8>> { m.into_iter().map(|(_, d)| d).collect() };
-    let prompt_path = messages(&prompt, TOPIC_ANCHOR_PATH);
+    // the same messages with late samples (the last is logged after the last message before
+    // it, which the late poses move); without the samples after frame 20, frame 30 has no
+    // anchor pose, and the path ends at frame 20's.
+    let paths = |bytes: &[u8]| -> Vec<Vec<u8>> {
+        mcap::MessageStream::new(bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .filter(|m| m.channel.topic == TOPIC_ANCHOR_PATH)
+            .map(|m| m.data.into_owned())
+            .collect()
+    };
+    let prompt_path = paths(&prompt.0);
     assert_eq!(prompt_path.len(), 3);
-    assert!(data(messages(&late, TOPIC_ANCHOR_PATH)) == data(prompt_path.clone()));
-    let ended_path = messages(&ended, TOPIC_ANCHOR_PATH);
+    assert_eq!(paths(&late.0), prompt_path);
+    let ended_path = paths(&ended.0);
     assert_eq!(ended_path.len(), 2);
-    assert!(ended_path[0] == prompt_path[0]);
-    let last: foxglove::messages::PosesInFrame = prost::Message::decode(&ended_path[1].1[..]).unwrap();
+    assert_eq!(ended_path[0], prompt_path[0]);
+    let last: foxglove::messages::PosesInFrame = prost::Message::decode(&ended_path[1][..]).unwrap();
     assert_eq!(last.poses.len(), 21);
     let end = last.poses[20].position.as_ref().unwrap();
     let truth_20 = gt_pose(20).translation.vector;
@@ -400,56 +386,20 @@ fn the_anchor_channel_is_read_with_the_images_and_late_samples_are_waited_for() 
 
 #[test]
 fn external_poses_are_read_with_the_images_and_frames_wait_for_late_samples() {
-    use occmask::mcap_io::annotate::TOPIC_ODOMETRY;
-    use occmask::mcap_io::input::decode::read_poses;
-
     let dir = tempfile::tempdir().unwrap();
-    let run = |name: &str, spec: &FixtureSpec| fixture_processed(dir.path(), name, spec, &external_poses());
-    let odometry = |bytes: &[u8]| {
-        read_poses(
-            &McapInput::from_bytes(bytes.to_vec(), Path::new("out.mcap")).unwrap(),
-            TOPIC_ODOMETRY,
-        )
-        .unwrap()
-    };
-    let frames = 60;
-    let (prompt, prompt_report) = run(
-        "prompt",
-        &FixtureSpec {
-            frames,
-            ..FixtureSpec::default()
-        },
-    );
-    // Each pose logged 5 frames after its stamp: every frame waits for the sample after it
-    // before it is processed, and gets the same pose.
-    let (late, late_report) = run(
-        "late",
-        &FixtureSpec {
-            frames,
-            ground_truth_delay_ns: 5 * FRAME_NS,
-            ..FixtureSpec::default()
-        },
-    );
-    assert_eq!((prompt_report.frames, late_report.frames), (60, 60));
-    assert_eq!(late_report.outside_pose_stream, 0);
-    let (p, l) = (odometry(&prompt), odometry(&late));
-    assert_eq!(p.len(), frames);
-    for (i, (a, b)) in p.iter().zip(&l).enumerate() {
-        assert_eq!(a.timestamp_ns, b.timestamp_ns);
-        assert_eq!(a.world_from_camera, b.world_from_camera, "frame {i}");
-        let d = a.world_from_camera.inverse() * gt_pose(i);
-        assert!(d.translation.vector.norm() < 1e-9, "frame {i}");
+    let [prompt, late, ended] = pose_timings(dir.path(), &external_poses());
+    // Late samples: every frame is processed, with the ground truth as its pose.
+    for (name, (_, report, odometry)) in [("prompt", &prompt), ("late", &late)] {
+        assert_eq!(report.frames, TIMING_FRAMES as u64, "{name}");
+        assert_eq!(report.outside_pose_stream, 0, "{name}");
+        for (i, pose) in odometry.iter().enumerate() {
+            let d = pose.world_from_camera.inverse() * gt_pose(i);
+            assert!(d.translation.vector.norm() < 1e-9, "{name}: frame {i}");
+        }
     }
-    // A pose stream that stops after frame 20: the frames after it are processed once the
-    // input is read 1 s past them, as outside the pose stream (not processed).
-    let (ended, ended_report) = run(
-        "ended",
-        &FixtureSpec {
-            frames,
-            ground_truth_end_frame: 21,
-            ..FixtureSpec::default()
-        },
-    );
-    assert_eq!((ended_report.frames, ended_report.outside_pose_stream), (21, 39));
-    assert_eq!(odometry(&ended)[..], p[..21]);
+    assert_eq!(late.2, prompt.2);
+    // A stream that stops after frame 20: the frames after it are outside it (not processed).
+    let (_, report, odometry) = &ended;
+    assert_eq!((report.frames, report.outside_pose_stream), (21, 39));
+    assert_eq!(odometry[..], prompt.2[..21]);
 }
