@@ -97,8 +97,9 @@ struct PointSamples {
 }
 
 impl FrameLoop {
-    /// Pairs what can be paired, processes the pairs, and copies input messages that can no
-    /// longer have new messages written before them.
+    /// Pairs what can be paired, processes the pairs whose pose source is read past them, writes
+    /// the results whose anchor is, and copies input messages that can no longer have new
+    /// messages written before them.
     pub(super) fn drain(
         &mut self,
         ctx: &FrameContext<'_>,
