@@ -117,13 +117,9 @@ impl FrameLoop {
                 Pairing::Pair(pair) => self.unposed.push_back(*pair),
             }
         }
-        while let Some((color, _)) = self.unposed.front() {
-            if !self.poses.settled(color.timestamp_ns, color.log_time_ns) {
-                break;
-            }
-            let Some((color, depth)) = self.unposed.pop_front() else {
-                break;
-            };
+        while let Some((color, depth)) = pop_front_if(&mut self.unposed, |(color, _)| {
+            self.poses.settled(color.timestamp_ns, color.log_time_ns)
+        }) {
             self.frame(ctx, output, make_processor, hooks, color, depth)?;
         }
         if end_of_stream {
@@ -320,15 +316,11 @@ impl FrameLoop {
         output: &OutputQueue,
         hooks: &mut dyn ProcessHooks,
     ) -> Result<()> {
-        while let Some((frame, _)) = self.waiting.front() {
-            if let Some(anchor) = &self.anchor {
-                if !anchor.settled(frame.timestamp_ns, frame.log_time_ns) {
-                    break;
-                }
-            }
-            let Some((frame, result)) = self.waiting.pop_front() else {
-                break;
-            };
+        while let Some((frame, result)) = pop_front_if(&mut self.waiting, |(frame, _)| {
+            self.anchor
+                .as_ref()
+                .is_none_or(|a| a.settled(frame.timestamp_ns, frame.log_time_ns))
+        }) {
             if self.world_from_odometry.is_none() {
                 match &self.anchor {
                     None => self.world_from_odometry = Some(Isometry3::identity()),
@@ -441,6 +433,15 @@ impl FrameLoop {
         })))?;
         self.report.frames += 1;
         Ok(())
+    }
+}
+
+/// The front of `queue`, taken when `ready` says so.
+fn pop_front_if<T>(queue: &mut VecDeque<T>, ready: impl FnOnce(&T) -> bool) -> Option<T> {
+    if queue.front().is_some_and(ready) {
+        queue.pop_front()
+    } else {
+        None
     }
 }
 

@@ -258,16 +258,19 @@ impl AnchorStream {
             OdometryAnchor::IfPresent(t) => (t, false),
             OdometryAnchor::Required(t) => (t, true),
         };
-        let no_poses = || Error::NoPoses {
-            path: input.path().to_owned(),
-            role: PoseRole::Anchor,
-            topic: topic.clone(),
-            child_frame: None,
-            channels: input.channels().values().map(|c| c.topic.clone()).collect(),
+        // An absent or empty channel: an error when required, else no anchor.
+        let absent = || match required {
+            false => Ok(None),
+            true => Err(Error::NoPoses {
+                path: input.path().to_owned(),
+                role: PoseRole::Anchor,
+                topic: topic.clone(),
+                child_frame: None,
+                channels: input.channels().values().map(|c| c.topic.clone()).collect(),
+            }),
         };
-        let absent = if required { Err(no_poses()) } else { Ok(None) };
         let Some(channel) = input.channel_by_topic(topic) else {
-            return absent;
+            return absent();
         };
         let Some(channel_type) = channel.channel_type.filter(|ct| ct.is_pose()) else {
             return Err(unreadable(
@@ -277,7 +280,7 @@ impl AnchorStream {
             ));
         };
         let Some(first) = input.first_message(channel.id)? else {
-            return absent;
+            return absent();
         };
         decode_poses(channel_type, topic, &first.data).map_err(|e| unreadable(topic, required, e))?;
         // The first message is read again, in its turn, by `observe`.
