@@ -213,8 +213,7 @@ fn check(
         Expect::Fails(needles) => {
             assert_eq!(out.status.code(), Some(1), "{name}: expected exit 1: {err}");
             assert!(
-                err.lines()
-                    .any(|l| l.starts_with("error: ") && needles.iter().all(|n| l.contains(n))),
+                has_line(&err, "error: ", needles),
                 "{name}: expected one error line with {needles:?}: {err}"
             );
             assert!(left.is_empty(), "{name}: left behind {left:?}: {err}");
@@ -227,8 +226,7 @@ fn check(
                 "{name}: expected exit {code}: {err}"
             );
             assert!(
-                err.lines()
-                    .any(|l| l.starts_with("warning: ") && needles.iter().all(|n| l.contains(n))),
+                has_line(&err, "warning: ", needles),
                 "{name}: expected one warning line with {needles:?}: {err}"
             );
             assert!(!left.iter().any(|e| e.ends_with(".tmp")), "{name}: {left:?}");
@@ -240,6 +238,12 @@ fn check(
         }
     }
     out
+}
+
+/// Whether one line of `text` starts with `prefix` and contains every needle.
+fn has_line(text: &str, prefix: &str, needles: &[&str]) -> bool {
+    text.lines()
+        .any(|l| l.starts_with(prefix) && needles.iter().all(|n| l.contains(n)))
 }
 
 fn os(v: &[&dyn AsRef<std::ffi::OsStr>]) -> Vec<OsString> {
@@ -776,14 +780,12 @@ fn eval_bad_inputs() {
     // The unreadable sample is left out of the anchor, the others anchor the odometry, and
     // the warning says which message and why (named with --anchor-topic, the channel is
     // required, and the same message fails the file: a case of `process_bad_input_corpus`).
-    assert!(
-        stderr(&out).lines().any(|l| l.starts_with("warning: ")
-            && l.contains("1 ground-truth message(s) did not decode")
-            && l.contains("/groundtruth/pose")
-            && l.contains("NaN")),
-        "{}",
-        stderr(&out)
-    );
+    let needles = [
+        "1 ground-truth message(s) did not decode",
+        "/groundtruth/pose",
+        "NaN",
+    ];
+    assert!(has_line(&stderr(&out), "warning: ", &needles), "{}", stderr(&out));
     assert!(!stderr(&out).contains("the odometry starts at the first camera"));
     // A ground truth whose first message does not decode is not used at all.
     let first_nan = dir.join("first_nan.mcap");
@@ -795,14 +797,12 @@ fn eval_bad_inputs() {
     let first_nan_out = dir.join("first_nan_out.mcap");
     let out = occmask(&os(&[&"process", &first_nan, &"-o", &first_nan_out]));
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    assert!(
-        stderr(&out).lines().any(|l| l.starts_with("warning: ")
-            && l.contains("the odometry starts at the first camera")
-            && l.contains("/groundtruth/pose")
-            && l.contains("NaN")),
-        "{}",
-        stderr(&out)
-    );
+    let needles = [
+        "the odometry starts at the first camera",
+        "/groundtruth/pose",
+        "NaN",
+    ];
+    assert!(has_line(&stderr(&out), "warning: ", &needles), "{}", stderr(&out));
     std::fs::remove_file(&first_nan).unwrap();
     std::fs::remove_file(&first_nan_out).unwrap();
     // A processed file cut inside its summary (a copy interrupted near the end).
