@@ -43,7 +43,7 @@ use std::collections::VecDeque;
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
-use super::reduce::{copy_or_enlarge, halvings_keeping_side, Reduced};
+use super::reduce::{copy_or_enlarge, halvings_keeping_side, FrameReduction, Reduced};
 use super::{
     check_size, valid_depth_fraction, FrameInput, FrameOutput, PoseSource, Processor, ProcessorConfig,
 };
@@ -655,10 +655,32 @@ impl OfflineProcessor {
     /// # Errors
     /// As [`Processor::process`], and whatever `emit` returns.
     pub fn push(&mut self, frame: &FrameInput<'_>, emit: &mut Emit<'_>) -> Result<()> {
+        self.push_reducing(frame, None, emit)
+    }
+
+    /// [`Self::push`] of `frame` as `reduction` reduces it to this processor's size (`None`:
+    /// `frame` is of that size). Once the registration check has decided, the reduction runs
+    /// in the first pass's half of the join, beside the later passes (until then the check
+    /// reads the reduced frame before the passes start): the same result, off the critical
+    /// path when the later passes take longer.
+    pub(crate) fn push_reducing(
+        &mut self,
+        frame: &FrameInput<'_>,
+        mut reduction: Option<&mut FrameReduction>,
+        emit: &mut Emit<'_>,
+    ) -> Result<()> {
         let size = self.later.refinement.size;
-        check_size("gray image", frame.gray.size(), size)?;
-        check_size("depth image", frame.depth_m.size(), size)?;
-        self.check_registration(Some(frame))?;
+        if reduction.is_none() {
+            // A frame of another size fails before any pass runs.
+            working_frame(frame, None, size)?;
+        }
+        let reduce_first = self.registration.is_some();
+        if reduce_first {
+            if let Some(r) = reduction.as_deref_mut() {
+                r.reduce(frame)?;
+            }
+            self.check_registration(Some(&working_frame(frame, reduction.as_deref(), size)?))?;
+        }
         let mut buffered = self.later.refinement.spare.pop().unwrap_or_else(|| {
             // The detector leaves the evidence out on small images (then the two masks agree).
             Buffered::new(
@@ -668,7 +690,14 @@ impl OfflineProcessor {
         });
         let (first, later, config) = (&mut self.first, &mut self.later, &self.config);
         let (first_done, later_done) = rayon::join(
-            || first.run(frame, &mut buffered),
+            || {
+                if !reduce_first {
+                    if let Some(r) = reduction.as_deref_mut() {
+                        r.reduce(frame)?;
+                    }
+                }
+                first.run(&working_frame(frame, reduction.as_deref(), size)?, &mut buffered)
+            },
             || later.work_beside_first_pass(config, emit),
         );
         later_done?;
@@ -950,6 +979,18 @@ impl Refinement {
         }
         Ok(())
     }
+}
+
+/// `frame` as `reduction` left it (`None`: as it is), checked to be of `size`.
+fn working_frame<'a>(
+    frame: &'a FrameInput<'a>,
+    reduction: Option<&'a FrameReduction>,
+    size: ImageSize,
+) -> Result<FrameInput<'a>> {
+    let frame = reduction.map_or(*frame, |r| r.view(frame));
+    check_size("gray image", frame.gray.size(), size)?;
+    check_size("depth image", frame.depth_m.size(), size)?;
+    Ok(frame)
 }
 
 /// Marks in `near` (nonzero = near) the pixels of `depth_m` with valid depth nearer than

@@ -2,6 +2,7 @@
 //! first pass's reduced frames ([`super::offline`]) and the working resolution of a whole
 //! sequence ([`super::sequence`]).
 
+use super::FrameInput;
 use crate::error::Result;
 use crate::image_buf::{DepthMeters, GrayF32, Image, ImageSize, Mask};
 use crate::pyramid::{downsample_depth_into, downsample_gray_into, level_size};
@@ -52,6 +53,55 @@ impl Reduced {
             self.gray.last().unwrap_or(gray),
             self.depth_m.last().unwrap_or(depth_m),
         ))
+    }
+}
+
+/// A whole frame reduced to a working resolution: [`Reduced`] for its images, and its ignore
+/// mask by [`reduce_mask_max`]. [`Self::reduce`] computes, [`Self::view`] reads the result (so
+/// that a caller can reduce in one place and read in another).
+pub(crate) struct FrameReduction {
+    images: Reduced,
+    ignore_in_previous: Mask,
+}
+
+impl FrameReduction {
+    /// `None` for 0 halvings.
+    pub(crate) fn new(size: ImageSize, halvings: usize) -> Option<Self> {
+        Reduced::new(size, halvings).map(|images| Self {
+            images,
+            ignore_in_previous: Mask::filled(level_size(size, halvings), 0),
+        })
+    }
+
+    /// The working resolution.
+    pub(crate) fn size(&self) -> ImageSize {
+        self.ignore_in_previous.size()
+    }
+
+    /// Reduces `frame`'s images and ignore mask.
+    ///
+    /// # Errors
+    /// [`crate::Error::SizeMismatch`] when the images are not of the size given to [`Self::new`].
+    pub(crate) fn reduce(&mut self, frame: &FrameInput<'_>) -> Result<()> {
+        self.images.reduce(frame.gray, frame.depth_m)?;
+        if let Some(full) = frame.ignore_in_previous {
+            reduce_mask_max(full, &mut self.ignore_in_previous);
+        }
+        Ok(())
+    }
+
+    /// `frame` as the last [`Self::reduce`] of it left it.
+    pub(crate) fn view<'a>(&'a self, frame: &FrameInput<'a>) -> FrameInput<'a> {
+        let (gray, depth_m) = match (self.images.gray.last(), self.images.depth_m.last()) {
+            (Some(gray), Some(depth_m)) => (gray, depth_m),
+            _ => (frame.gray, frame.depth_m),
+        };
+        FrameInput {
+            gray,
+            depth_m,
+            ignore_in_previous: frame.ignore_in_previous.map(|_| &self.ignore_in_previous),
+            ..*frame
+        }
     }
 }
 

@@ -13,7 +13,7 @@
 #[cfg(doc)]
 use super::offline::OfflineConfig;
 use super::offline::{ColourRegistration, Emit, OfflineProcessor, Sink};
-use super::reduce::{copy_or_enlarge, halvings_keeping_side, reduce_mask_max, Reduced};
+use super::reduce::{copy_or_enlarge, halvings_keeping_side, FrameReduction};
 use super::{check_size, FrameInput, FrameOutput, ProcessingMode, Processor, ProcessorConfig};
 use crate::error::Result;
 use crate::geometry::PinholeIntrinsics;
@@ -36,8 +36,7 @@ enum Pipeline {
 
 /// Buffers of the reduction and the enlargement.
 struct WorkingResolution {
-    reduced: Reduced,
-    ignore_in_previous: Mask,
+    reduction: FrameReduction,
     mask: Mask,
     odometry_mask: Mask,
     accumulation_m: DepthMeters,
@@ -71,9 +70,8 @@ impl SequenceProcessor {
         Ok(Self {
             pipeline,
             size,
-            working: Reduced::new(size, halvings).map(|reduced| WorkingResolution {
-                reduced,
-                ignore_in_previous: Mask::filled(working_size, 0),
+            working: FrameReduction::new(size, halvings).map(|reduction| WorkingResolution {
+                reduction,
                 mask: Mask::filled(size, 0),
                 odometry_mask: Mask::filled(size, 0),
                 accumulation_m: DepthMeters::filled(size, 0.0),
@@ -84,7 +82,7 @@ impl SequenceProcessor {
     /// The size the frames are processed at.
     pub fn working_size(&self) -> ImageSize {
         match &self.working {
-            Some(working) => working.ignore_in_previous.size(),
+            Some(working) => working.reduction.size(),
             None => self.size,
         }
     }
@@ -106,30 +104,25 @@ impl SequenceProcessor {
             return self.pipeline.push(frame, emit);
         };
         let WorkingResolution {
-            reduced,
-            ignore_in_previous,
+            reduction,
             mask,
             odometry_mask,
             accumulation_m,
         } = working;
-        let (gray, depth_m) = reduced.reduce(frame.gray, frame.depth_m)?;
-        let ignore_in_previous = frame.ignore_in_previous.map(|full| {
-            reduce_mask_max(full, ignore_in_previous);
-            &*ignore_in_previous
-        });
-        let reduced_frame = FrameInput {
-            gray,
-            depth_m,
-            ignore_in_previous,
-            ..*frame
-        };
         let mut enlarged = Enlarged {
             mask,
             odometry_mask,
             accumulation_m,
         };
-        self.pipeline
-            .push(&reduced_frame, &mut |out| emit(enlarged.output(out)))
+        let emit: &mut Emit<'_> = &mut |out| emit(enlarged.output(out));
+        match &mut self.pipeline {
+            // The offline processor reduces the frame beside its later passes.
+            Pipeline::Offline(processor) => processor.push_reducing(frame, Some(reduction), emit),
+            Pipeline::Causal(_) => {
+                reduction.reduce(frame)?;
+                self.pipeline.push(&reduction.view(frame), emit)
+            }
+        }
     }
 
     /// Hands `emit` the results still pending at the end of the input, oldest first.
@@ -210,6 +203,7 @@ mod tests {
     use super::*;
     use crate::error::Error;
     use crate::pipeline::offline::MIN_WORKING_SIDE_PX;
+    use crate::pipeline::reduce::Reduced;
     use crate::pipeline::PoseSource;
     use crate::synthetic::{Scenario, SequenceConfig, SyntheticSequence};
 
@@ -260,44 +254,63 @@ mod tests {
 
     /// The offline mode on VGA is the offline processor on the halved frames through the halved
     /// intrinsics, its masks enlarged: the same masks pixel for pixel, at the input's size.
+    /// Checked with the colour registration check deciding after [`FRAMES`] (every frame is
+    /// reduced before the passes start), after 6 frames (later ones are reduced beside the
+    /// later passes) and off (every frame so).
     #[test]
     fn offline_vga_is_the_halved_sequence_with_its_masks_enlarged() {
         let sequence = vga_sequence();
         let (size, intrinsics) = (sequence.config.size, sequence.config.intrinsics());
-        let config = external(ProcessingMode::Offline);
-        let mut processor = SequenceProcessor::new(size, intrinsics, config).unwrap();
-        assert_eq!(processor.working_size(), ImageSize::new(320, 240));
-        let mut got = Vec::new();
-        let mut keep = |out: FrameOutput<'_>| {
-            got.push(out.mask.clone());
-            Ok(())
-        };
-        feed(&sequence, 0, &mut |input| {
-            processor.push(input, &mut keep).unwrap()
-        });
-        processor.finish(&mut keep).unwrap();
+        let default = external(ProcessingMode::Offline);
+        let mut early_check = default;
+        if let Some(check) = &mut early_check.offline.unregistered_colour {
+            check.frames = 6;
+        }
+        let mut no_check = default;
+        no_check.offline.unregistered_colour = None;
+        assert!(default
+            .offline
+            .unregistered_colour
+            .is_some_and(|c| c.frames > FRAMES));
+        for config in [default, early_check, no_check] {
+            let mut processor = SequenceProcessor::new(size, intrinsics, config).unwrap();
+            assert_eq!(processor.working_size(), ImageSize::new(320, 240));
+            let mut got = Vec::new();
+            let mut keep = |out: FrameOutput<'_>| {
+                got.push(out.mask.clone());
+                Ok(())
+            };
+            feed(&sequence, 0, &mut |input| {
+                processor.push(input, &mut keep).unwrap()
+            });
+            processor.finish(&mut keep).unwrap();
 
-        let mut reference =
-            OfflineProcessor::new(ImageSize::new(320, 240), intrinsics.at_level(1), config).unwrap();
-        let mut expected = Vec::new();
-        let mut keep = |out: FrameOutput<'_>| {
-            let mut full = Mask::filled(size, 0);
-            copy_or_enlarge(out.mask, &mut full);
-            expected.push(full);
-            Ok(())
-        };
-        feed(&sequence, 1, &mut |input| {
-            reference.push(input, &mut keep).unwrap()
-        });
-        reference.finish(&mut keep).unwrap();
+            let mut reference =
+                OfflineProcessor::new(ImageSize::new(320, 240), intrinsics.at_level(1), config).unwrap();
+            let mut expected = Vec::new();
+            let mut keep = |out: FrameOutput<'_>| {
+                let mut full = Mask::filled(size, 0);
+                copy_or_enlarge(out.mask, &mut full);
+                expected.push(full);
+                Ok(())
+            };
+            feed(&sequence, 1, &mut |input| {
+                reference.push(input, &mut keep).unwrap()
+            });
+            reference.finish(&mut keep).unwrap();
 
-        assert_eq!(got.len(), FRAMES);
-        assert!(got.iter().all(|m| m.size() == size));
-        assert!(
-            got.iter().any(|m| m.as_slice().iter().any(|&v| v != 0)),
-            "nothing marked"
-        );
-        assert!(got == expected, "masks differ from the halved sequence's");
+            let check = config.offline.unregistered_colour.map(|c| c.frames);
+            assert_eq!(got.len(), FRAMES, "check after {check:?} frames");
+            assert!(got.iter().all(|m| m.size() == size));
+            assert!(
+                got.iter().any(|m| m.as_slice().iter().any(|&v| v != 0)),
+                "nothing marked (check after {check:?} frames)"
+            );
+            assert!(
+                got == expected,
+                "masks differ from the halved sequence's (check after {check:?} frames)"
+            );
+        }
     }
 
     #[test]
