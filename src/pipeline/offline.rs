@@ -45,7 +45,8 @@ use serde::{Deserialize, Serialize};
 
 use super::reduce::{copy_or_enlarge, halvings_keeping_side, FrameReduction, Reduced};
 use super::{
-    check_size, valid_depth_fraction, FrameInput, FrameOutput, PoseSource, Processor, ProcessorConfig,
+    check_size, valid_depth_fraction, FrameInput, FrameOutput, FrameStats, PoseSource, Processor,
+    ProcessorConfig,
 };
 use crate::dvo::{DvoConfig, MotionPriorConfig};
 use crate::error::{Error, Result};
@@ -422,9 +423,7 @@ struct Refinement {
     size: ImageSize,
     /// Scratch: a buffered frame's gray as f32.
     gray: GrayF32,
-    /// The emitted mask (refinement ∪ backward).
-    mask: Mask,
-    /// The first pass's forward ∪ backward mask of the last emitted frame (the next frame's
+    /// The first pass's forward ∪ backward mask of the last refined frame (the next frame's
     /// `ignore_in_previous` in the closed loop's refinement pass).
     previous_seed_mask: Mask,
     has_previous_seed_mask: bool,
@@ -432,6 +431,43 @@ struct Refinement {
     hysteresis: Option<Hysteresis>,
     /// Completes the emitted mask's objects to their bodies (None when it is off).
     bodies: Option<BodyCompletion>,
+    /// Recycled [`Refined`] results.
+    spare_refined: Vec<Refined>,
+    /// Scratch of the hysteresis's candidates (one image row).
+    candidate_row: Vec<u8>,
+}
+
+/// One frame's refinement-pass results, copied out of the processor: the frame's completion
+/// ([`complete_refined`]: body completion, hysteresis, `emit`) runs while the processor goes on
+/// to the next frame.
+struct Refined {
+    index: u64,
+    timestamp_ns: u64,
+    current_from_previous: Isometry3<f64>,
+    world_from_camera: Isometry3<f64>,
+    stats: FrameStats,
+    /// The refinement pass's own mask.
+    refinement_mask: Mask,
+    odometry_mask: Mask,
+    accumulation_m: DepthMeters,
+    /// The detector's slow-change candidates of the frame for the hysteresis (none when it is
+    /// off or the frame has no depth).
+    candidates: Vec<(u32, f32)>,
+    /// The published mask: refinement ∪ backward, completed to bodies.
+    mask: Mask,
+}
+
+/// What the refinement pass of one frame reads and writes besides the frame
+/// ([`Refinement::refine_ready`] lends it to the pool's other thread).
+struct RefinementPass<'a> {
+    source: PoseSource,
+    refine: &'a mut Processor,
+    gray: &'a mut GrayF32,
+    previous_seed_mask: &'a mut Mask,
+    has_previous_seed_mask: &'a mut bool,
+    /// The hysteresis's low fraction, when it is on.
+    low_fraction: Option<f32>,
+    candidate_row: &'a mut Vec<u8>,
 }
 
 impl OfflineProcessor {
@@ -558,13 +594,14 @@ impl OfflineProcessor {
                     spare: Vec::new(),
                     size,
                     gray: GrayF32::filled(size, 0.0),
-                    mask: Mask::filled(size, 0),
                     previous_seed_mask: Mask::filled(size, 0),
                     has_previous_seed_mask: false,
                     hysteresis,
                     bodies: body_completion
                         .map(|c| BodyCompletion::new(size, c))
                         .transpose()?,
+                    spare_refined: Vec::new(),
+                    candidate_row: Vec::with_capacity(size.width),
                 },
             },
             registration,
@@ -891,73 +928,116 @@ impl BackwardPass {
 }
 
 impl Refinement {
-    /// Pass 3 and `emit` for the first `count` waiting frames, which are then recycled.
+    /// Pass 3 and `emit` for the first `count` waiting frames, which are then recycled. Each
+    /// frame's completion ([`complete_refined`]) runs on this thread beside the next frame's
+    /// refinement pass, which the pool's other thread may take.
     fn refine_ready(&mut self, count: usize, emit: &mut Sink<'_>) -> Result<()> {
+        let mut previous: Option<(Buffered, Refined)> = None;
+        let mut result = Ok(());
         for _ in 0..count {
             let Some(frame) = self.ready.pop_front() else {
                 break;
             };
-            let result = self.refine_and_emit(&frame, emit);
-            self.spare.push(frame);
-            result?;
+            let size = self.size;
+            let mut refined = self.spare_refined.pop().unwrap_or_else(|| Refined::new(size));
+            let low_fraction = self.hysteresis.as_ref().map(Hysteresis::low_fraction);
+            let Self {
+                source,
+                refine,
+                gray,
+                previous_seed_mask,
+                has_previous_seed_mask,
+                hysteresis,
+                bodies,
+                spare,
+                spare_refined,
+                candidate_row,
+                ..
+            } = self;
+            let mut pass = RefinementPass {
+                source: *source,
+                refine,
+                gray,
+                previous_seed_mask,
+                has_previous_seed_mask,
+                low_fraction,
+                candidate_row,
+            };
+            let mut refined_result = Ok(());
+            let completed = rayon::in_place_scope(|scope| {
+                scope.spawn(|_| refined_result = pass.run(&frame, &mut refined));
+                previous.take().map_or(Ok(()), |(done, mut out)| {
+                    let completed =
+                        complete_refined(&done, &mut out, bodies.as_mut(), hysteresis.as_mut(), size, emit);
+                    spare.push(done);
+                    spare_refined.push(out);
+                    completed
+                })
+            });
+            result = completed.and(refined_result);
+            if result.is_err() {
+                self.spare.push(frame);
+                self.spare_refined.push(refined);
+                break;
+            }
+            previous = Some((frame, refined));
         }
-        Ok(())
+        if let Some((frame, mut refined)) = previous {
+            result = complete_refined(
+                &frame,
+                &mut refined,
+                self.bodies.as_mut(),
+                self.hysteresis.as_mut(),
+                self.size,
+                emit,
+            );
+            self.spare.push(frame);
+            self.spare_refined.push(refined);
+        }
+        result
     }
+}
 
-    /// Pass 3 for one frame, then `emit` with the refinement ∪ backward mask, its objects
-    /// completed to their bodies.
-    fn refine_and_emit(&mut self, frame: &Buffered, emit: &mut Sink<'_>) -> Result<()> {
-        dequantize_gray_into(&frame.gray, &mut self.gray);
+impl RefinementPass<'_> {
+    /// Pass 3 for `frame`, its results into `refined`.
+    fn run(&mut self, frame: &Buffered, refined: &mut Refined) -> Result<()> {
+        dequantize_gray_into(&frame.gray, self.gray);
         let closed_loop = self.source == PoseSource::DvoClosedLoop;
         let replayed_pose = match self.source {
             PoseSource::DvoClosedLoop => None,
             PoseSource::DvoUnmasked => Some(frame.world_from_camera),
             PoseSource::External { .. } => frame.world_from_marker,
         };
-        let ignore = (closed_loop && self.has_previous_seed_mask).then_some(&self.previous_seed_mask);
+        let ignore = (closed_loop && *self.has_previous_seed_mask).then_some(&*self.previous_seed_mask);
         let out = self.refine.process(&FrameInput {
             timestamp_ns: frame.timestamp_ns,
-            gray: &self.gray,
+            gray: self.gray,
             depth_m: &frame.depth_m,
             world_from_marker: replayed_pose.as_ref(),
             ignore_in_previous: ignore,
         })?;
-        for ((m, &r), &b) in self
-            .mask
+        refined.index = out.index;
+        refined.timestamp_ns = out.timestamp_ns;
+        refined.current_from_previous = out.current_from_previous;
+        refined.world_from_camera = out.world_from_camera;
+        refined.stats = out.stats;
+        refined
+            .refinement_mask
             .as_mut_slice()
-            .iter_mut()
-            .zip(out.mask.as_slice())
-            .zip(frame.backward_mask.as_slice())
-        {
-            *m = r | b;
-        }
-        if let Some(bodies) = &mut self.bodies {
-            bodies.complete(&mut self.mask, &frame.depth_m)?;
-        }
-        let moving = self.mask.as_slice().iter().filter(|&&m| m != 0).count();
-        let mut stats = out.stats;
-        stats.detector.mask_pixels = moving;
-        stats.moving_fraction = moving as f64 / self.size.area().max(1) as f64;
-        let output = FrameOutput {
-            mask: &self.mask,
-            stats,
-            ..out
-        };
-        match &mut self.hysteresis {
-            Some(hysteresis) => {
-                hysteresis.hold(&output, out.mask);
-                let detector = self.refine.detector();
-                let has_depth = frame.has_depth;
-                hysteresis.settle(
-                    |fraction, row, candidates| {
-                        if has_depth {
-                            detector.slow_candidates(fraction, row, candidates);
-                        }
-                    },
-                    emit,
-                )?;
-            }
-            None => emit(output)?,
+            .copy_from_slice(out.mask.as_slice());
+        refined
+            .odometry_mask
+            .as_mut_slice()
+            .copy_from_slice(out.odometry_mask.as_slice());
+        refined
+            .accumulation_m
+            .as_mut_slice()
+            .copy_from_slice(out.accumulation_m.as_slice());
+        refined.candidates.clear();
+        if let Some(fraction) = self.low_fraction.filter(|_| frame.has_depth) {
+            self.refine
+                .detector()
+                .slow_candidates(fraction, self.candidate_row, &mut refined.candidates);
         }
         if closed_loop {
             for ((s, &f), &b) in self
@@ -975,9 +1055,72 @@ impl Refinement {
             {
                 *s = f | b;
             }
-            self.has_previous_seed_mask = true;
+            *self.has_previous_seed_mask = true;
         }
         Ok(())
+    }
+}
+
+impl Refined {
+    fn new(size: ImageSize) -> Self {
+        Self {
+            index: 0,
+            timestamp_ns: 0,
+            current_from_previous: Isometry3::identity(),
+            world_from_camera: Isometry3::identity(),
+            stats: FrameStats::default(),
+            refinement_mask: Mask::filled(size, 0),
+            odometry_mask: Mask::filled(size, 0),
+            accumulation_m: DepthMeters::filled(size, 0.0),
+            candidates: Vec::new(),
+            mask: Mask::filled(size, 0),
+        }
+    }
+}
+
+/// The rest of pass 3 for a refined `frame`: `emit` (through the hysteresis, when it is on)
+/// with the refinement ∪ backward mask, its objects completed to their bodies.
+fn complete_refined(
+    frame: &Buffered,
+    refined: &mut Refined,
+    bodies: Option<&mut BodyCompletion>,
+    hysteresis: Option<&mut Hysteresis>,
+    size: ImageSize,
+    emit: &mut Sink<'_>,
+) -> Result<()> {
+    for ((m, &r), &b) in refined
+        .mask
+        .as_mut_slice()
+        .iter_mut()
+        .zip(refined.refinement_mask.as_slice())
+        .zip(frame.backward_mask.as_slice())
+    {
+        *m = r | b;
+    }
+    if let Some(bodies) = bodies {
+        bodies.complete(&mut refined.mask, &frame.depth_m)?;
+    }
+    let moving = refined.mask.as_slice().iter().filter(|&&m| m != 0).count();
+    let mut stats = refined.stats;
+    stats.detector.mask_pixels = moving;
+    stats.moving_fraction = moving as f64 / size.area().max(1) as f64;
+    let output = FrameOutput {
+        index: refined.index,
+        timestamp_ns: refined.timestamp_ns,
+        mask: &refined.mask,
+        odometry_mask: &refined.odometry_mask,
+        current_from_previous: refined.current_from_previous,
+        world_from_camera: refined.world_from_camera,
+        accumulation_m: &refined.accumulation_m,
+        stats,
+    };
+    match hysteresis {
+        Some(hysteresis) => {
+            hysteresis.hold(&output, &refined.refinement_mask);
+            let candidates = &mut refined.candidates;
+            hysteresis.settle(|_, _, held| std::mem::swap(held, candidates), emit)
+        }
+        None => emit(output),
     }
 }
 

@@ -90,6 +90,12 @@ impl Hysteresis {
         })
     }
 
+    /// The low threshold as a fraction of the slow-change evidence's α (what
+    /// [`Self::settle`] hands its `candidates`).
+    pub fn low_fraction(&self) -> f32 {
+        self.low_fraction
+    }
+
     /// Frames held back.
     pub fn len(&self) -> usize {
         self.held.len()

@@ -429,3 +429,52 @@ fn one_backward_pass_at_the_end_gives_the_masks_of_block_by_block_passes() {
         "no length left more than a block buffered"
     );
 }
+
+#[test]
+fn refining_a_frame_beside_the_previous_ones_completion_changes_nothing() {
+    // `refine_ready` completes each frame (bodies, hysteresis, emit) beside the next frame's
+    // refinement pass: refining the frames one call at a time (no overlap) must give the same
+    // results. At 320×240 the slow-change evidence, and so the hysteresis, is on.
+    let frames = 24;
+    let size = ImageSize::new(320, 240);
+    let sequence = SyntheticSequence::new(
+        Scenario::TwoObjectsCrossing,
+        SequenceConfig {
+            size,
+            frame_count: Some(frames),
+            ..SequenceConfig::default()
+        },
+    );
+    let config = ProcessorConfig {
+        offline: OfflineConfig {
+            unregistered_colour: None,
+            ..short_blocks()
+        },
+        ..ProcessorConfig::default()
+    };
+    let processor =
+        || OfflineProcessor::new(size, sequence.config.intrinsics(), config).expect("valid config");
+    let (mut together, mut one_by_one) = (processor(), processor());
+    assert!(together.later.refinement.hysteresis.is_some());
+    let (mut a, mut b) = (Emitted::new(), Emitted::new());
+    for i in 0..frames {
+        push(&mut together, &sequence, i, &mut |out| record(&mut a, &out));
+        push(&mut one_by_one, &sequence, i, &mut |out| record(&mut b, &out));
+    }
+    let waiting = one_by_one.later.buffer.len() + one_by_one.later.refinement.ready.len();
+    assert!(waiting >= 2, "{waiting} frame(s) left for the end");
+    together.finish(&mut |out| record(&mut a, &out)).expect("finish");
+    let later = &mut one_by_one.later;
+    let mut emit = |out: FrameOutput<'_>| record(&mut b, &out);
+    let kept = later.buffer.len();
+    later.backward_pass(kept).expect("backward");
+    while !later.refinement.ready.is_empty() {
+        later.refinement.refine_ready(1, &mut emit).expect("refine");
+    }
+    if let Some(hysteresis) = &mut later.refinement.hysteresis {
+        hysteresis.flush(&mut emit).expect("flush");
+    }
+    assert_eq!(a.len(), frames);
+    assert!(a.iter().any(|(.., mask)| mask.as_slice().iter().any(|&m| m != 0)));
+    assert!(a == b, "the results differ");
+}
