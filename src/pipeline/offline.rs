@@ -1117,8 +1117,7 @@ fn complete_refined(
     match hysteresis {
         Some(hysteresis) => {
             hysteresis.hold(&output, &refined.refinement_mask);
-            let candidates = &mut refined.candidates;
-            hysteresis.settle(|_, _, held| std::mem::swap(held, candidates), emit)
+            hysteresis.settle(&mut refined.candidates, emit)
         }
         None => emit(output),
     }

@@ -68,8 +68,6 @@ pub(super) struct Hysteresis {
     size: ImageSize,
     held: VecDeque<Held>,
     spare: Vec<Held>,
-    /// Scratch of the candidates (one image row).
-    row: Vec<u8>,
     /// Scratch of the sweep: the seeds it added to the frame it tests against (else 0).
     fresh_seeds: Mask,
 }
@@ -85,7 +83,6 @@ impl Hysteresis {
             size,
             held: VecDeque::with_capacity(config.hysteresis_frames + 1),
             spare: Vec::new(),
-            row: Vec::with_capacity(size.width),
             fresh_seeds: Mask::filled(size, 0),
         })
     }
@@ -145,28 +142,24 @@ impl Hysteresis {
         self.held.push_back(held);
     }
 
-    /// Completes the frame held last: `candidates(low_fraction, row scratch, list)` appends
-    /// the pixels above the low threshold with their depth (m)
-    /// ([`crate::occlusion::OcclusionDetector::slow_candidates`]); those off the mask are kept.
-    /// Then sweeps the frame's mask back over the held frames and emits those more than
-    /// `frames` behind.
-    pub fn settle(
-        &mut self,
-        candidates: impl FnOnce(f32, &mut Vec<u8>, &mut Vec<(u32, f32)>),
-        emit: &mut Sink<'_>,
-    ) -> Result<()> {
+    /// Completes the frame held last with its `candidates`: the pixels above the low threshold
+    /// ([`Self::low_fraction`]) with their depth (m), as
+    /// [`crate::occlusion::OcclusionDetector::slow_candidates`] lists them; it takes the list
+    /// (leaving an empty one) and keeps those off its mask. Then sweeps the frame's mask back
+    /// over the held frames and emits those more than `frames` behind.
+    pub fn settle(&mut self, candidates: &mut Vec<(u32, f32)>, emit: &mut Sink<'_>) -> Result<()> {
         self.settle_with(candidates, emit, Self::sweep)
     }
 
     /// [`Self::settle`] with the given sweep.
     fn settle_with(
         &mut self,
-        candidates: impl FnOnce(f32, &mut Vec<u8>, &mut Vec<(u32, f32)>),
+        candidates: &mut Vec<(u32, f32)>,
         emit: &mut Sink<'_>,
         sweep: fn(&mut Self),
     ) -> Result<()> {
         if let Some(held) = self.held.back_mut() {
-            candidates(self.low_fraction, &mut self.row, &mut held.candidates);
+            std::mem::swap(&mut held.candidates, candidates);
             let mask = held.mask.as_slice();
             held.candidates.retain(|&(i, _)| mask[i as usize] == 0);
         }
@@ -412,16 +405,11 @@ mod tests {
     ) {
         hold(hysteresis, index, Isometry3::identity(), mask_pixels, reset);
         let mut keep = |out: FrameOutput<'_>| record(&out, emitted);
-        hysteresis
-            .settle(
-                |fraction, _, out| {
-                    if w_m > fraction * ALPHA * DEPTH_M {
-                        out.extend(evidence.iter().map(|&i| (i as u32, DEPTH_M)));
-                    }
-                },
-                &mut keep,
-            )
-            .expect("emit");
+        let mut candidates = Vec::new();
+        if w_m > hysteresis.low_fraction() * ALPHA * DEPTH_M {
+            candidates.extend(evidence.iter().map(|&i| (i as u32, DEPTH_M)));
+        }
+        hysteresis.settle(&mut candidates, &mut keep).expect("emit");
     }
 
     /// Holds frame `index` seen from `world_from_camera`, its published mask the pixels
@@ -560,7 +548,7 @@ mod tests {
             for (index, world_from_camera, marked, candidates, reset) in &scenes {
                 hold(&mut h, *index, *world_from_camera, marked, *reset);
                 let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
-                h.settle_with(|_, _, out| out.extend_from_slice(candidates), &mut keep, sweep)
+                h.settle_with(&mut candidates.clone(), &mut keep, sweep)
                     .expect("emit");
             }
             let mut keep = |out: FrameOutput<'_>| record(&out, &mut emitted);
