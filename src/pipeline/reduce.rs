@@ -49,10 +49,12 @@ impl Reduced {
             let (done, rest) = self.depth_m.split_at_mut(k);
             downsample_depth_into(done.last().unwrap_or(depth_m), &mut rest[0])?;
         }
-        Ok((
-            self.gray.last().unwrap_or(gray),
-            self.depth_m.last().unwrap_or(depth_m),
-        ))
+        Ok(self.last().unwrap_or((gray, depth_m)))
+    }
+
+    /// The images of the last [`Self::reduce`] (of the size it reduces to).
+    fn last(&self) -> Option<(&GrayF32, &DepthMeters)> {
+        self.gray.last().zip(self.depth_m.last())
     }
 }
 
@@ -92,10 +94,7 @@ impl FrameReduction {
 
     /// `frame` as the last [`Self::reduce`] of it left it.
     pub(crate) fn view<'a>(&'a self, frame: &FrameInput<'a>) -> FrameInput<'a> {
-        let (gray, depth_m) = match (self.images.gray.last(), self.images.depth_m.last()) {
-            (Some(gray), Some(depth_m)) => (gray, depth_m),
-            _ => (frame.gray, frame.depth_m),
-        };
+        let (gray, depth_m) = self.images.last().unwrap_or((frame.gray, frame.depth_m));
         FrameInput {
             gray,
             depth_m,
