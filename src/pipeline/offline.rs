@@ -347,6 +347,9 @@ pub type Sink<'e> = dyn FnMut(FrameOutput<'_>) -> Result<()> + 'e;
 /// second chain over the frames that pass 1 has finished. [`Self::push`] runs the two side by
 /// side (`rayon::join`): the new frame's pass 1 on one thread, and on another the backward pass
 /// that the previous frame made due plus the refinement of a share of the frames waiting for it.
+/// Within the refinement, a frame's completion (body completion, hysteresis, emit) runs beside
+/// the next frame's pass; and once the colour registration check has decided, the reduction of
+/// the new frame to the working resolution (`push_reducing`) runs in pass 1's half.
 /// Both chains keep their order, so the results are those of running the passes one after the
 /// other; only the time differs (on one thread, `join` runs them in turn).
 pub struct OfflineProcessor {
