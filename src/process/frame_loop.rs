@@ -360,7 +360,7 @@ impl FrameLoop {
         if let Some(anchor) = &self.anchor {
             self.report.anchor_skipped = Some(format!(
                 "{} has no pose within {} ms of the first {} processed frames",
-                anchor.topic,
+                anchor.topic(),
                 ctx.config.max_pose_gap_ns / 1_000_000,
                 self.unanchored.len()
             ));

@@ -192,7 +192,7 @@ pub fn process_file<W: Write + Seek + Send>(
         metadata.insert("points_stride_px".to_owned(), grid.stride_px().to_string());
     }
     if let Some(anchor) = &anchor {
-        metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), anchor.topic.clone());
+        metadata.insert(METADATA_ODOMETRY_ANCHOR.to_owned(), anchor.topic().to_owned());
     }
     if let Some(t) = input.truncation() {
         // Recorded only for damaged inputs, so complete inputs keep their exact bytes.
@@ -216,7 +216,7 @@ pub fn process_file<W: Write + Seek + Send>(
         if config.processor.pose_source.is_external() {
             read.extend(topics.pose.as_ref().map(|p| p.topic.clone()));
         }
-        read.extend(anchor.as_ref().map(|a| a.topic.clone()));
+        read.extend(anchor.as_ref().map(|a| a.topic().to_owned()));
         Some(read)
     };
 

@@ -11,7 +11,7 @@ use std::path::Path;
 use nalgebra::Isometry3;
 
 use crate::error::{Error, PoseRole, Result};
-use crate::mcap_io::input::decode::{decode_poses, unsupported_schema, ChannelType, POSE_SCHEMA};
+use crate::mcap_io::input::decode::{decode_poses, unsupported_schema, ChannelType, PoseSample, POSE_SCHEMA};
 use crate::mcap_io::input::detect::{RgbdTopics, TopicOverrides};
 use crate::mcap_io::input::{McapInput, RawMessage};
 use crate::trajectory::{interpolate, StampedPose};
@@ -44,13 +44,10 @@ pub(super) struct InputPoses {
 
 /// The pose channel of an external pose source.
 struct ExternalPoses {
-    topic: String,
-    channel_id: u16,
-    channel_type: ChannelType,
+    channel: PoseChannel,
     /// The child frame whose poses are used ([`ProcessConfig::pose_child_frame`], else the
     /// first seen).
     child: Option<String>,
-    samples: StreamedPoses,
 }
 
 /// The pose of one frame from [`InputPoses::at`].
@@ -80,11 +77,8 @@ impl InputPoses {
                 .channel_type
                 .ok_or_else(|| unsupported_schema(channel, POSE_SCHEMA))?;
             let external = ExternalPoses {
-                topic: channel.topic.clone(),
-                channel_id: channel.id,
-                channel_type,
+                channel: PoseChannel::new(channel.topic.clone(), channel.id, channel_type),
                 child: config.pose_child_frame.clone(),
-                samples: StreamedPoses::default(),
             };
             match input.first_message(channel.id)? {
                 // Decoded here for its errors; read again, in its turn, by `observe`.
@@ -111,11 +105,10 @@ impl InputPoses {
         let Some(e) = &mut self.external else {
             return Ok(());
         };
-        e.samples.read(message.header.log_time);
-        if message.header.channel_id != e.channel_id {
+        let Some(samples) = e.channel.read(message) else {
             return Ok(());
-        }
-        for sample in decode_poses(e.channel_type, &e.topic, &message.data)? {
+        };
+        for sample in samples? {
             if let Some(c) = &sample.child_frame {
                 if c == crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED {
                     continue;
@@ -126,7 +119,7 @@ impl InputPoses {
                     Some(_) => {}
                 }
             }
-            e.samples.insert(sample.timestamp_ns, sample.parent_from_child);
+            e.channel.samples.insert(&sample);
         }
         Ok(())
     }
@@ -137,9 +130,9 @@ impl InputPoses {
     /// [`Error::NoPoses`] when the channel had no pose of the child frame.
     pub(super) fn finish(&mut self, input_path: &Path) -> Result<()> {
         match &mut self.external {
-            Some(e) if e.samples.poses.is_empty() => Err(e.no_poses(input_path)),
+            Some(e) if e.channel.samples.poses.is_empty() => Err(e.no_poses(input_path)),
             Some(e) => {
-                e.samples.complete = true;
+                e.channel.samples.complete = true;
                 Ok(())
             }
             None => Ok(()),
@@ -151,7 +144,7 @@ impl InputPoses {
     pub(super) fn settled(&self, stamp_ns: u64, log_time_ns: u64) -> bool {
         self.external
             .as_ref()
-            .is_none_or(|e| e.samples.settled(stamp_ns, log_time_ns))
+            .is_none_or(|e| e.channel.samples.settled(stamp_ns, log_time_ns))
     }
 
     /// The pose for a frame stamped `stamp`: interpolated from samples at most
@@ -159,7 +152,7 @@ impl InputPoses {
     pub(super) fn at(&self, stamp: u64) -> FramePose {
         match &self.external {
             None => FramePose::Estimated,
-            Some(e) => interpolate(&e.samples.poses, stamp, self.max_gap_ns)
+            Some(e) => interpolate(&e.channel.samples.poses, stamp, self.max_gap_ns)
                 .map_or(FramePose::Outside, FramePose::Given),
         }
     }
@@ -170,7 +163,7 @@ impl ExternalPoses {
         Error::NoPoses {
             path: input_path.to_owned(),
             role: PoseRole::External,
-            topic: self.topic.clone(),
+            topic: self.channel.topic.clone(),
             child_frame: self.child.clone(),
             channels: Vec::new(),
         }
@@ -196,13 +189,14 @@ impl StreamedPoses {
         self.read_log_time_ns = self.read_log_time_ns.max(log_time_ns);
     }
 
-    fn insert(&mut self, timestamp_ns: u64, world_from_camera: Isometry3<f64>) {
+    fn insert(&mut self, sample: &PoseSample) {
+        let timestamp_ns = sample.timestamp_ns;
         if let Err(at) = self.poses.binary_search_by_key(&timestamp_ns, |p| p.timestamp_ns) {
             self.poses.insert(
                 at,
                 StampedPose {
                     timestamp_ns,
-                    world_from_camera,
+                    world_from_camera: sample.parent_from_child,
                 },
             );
         }
@@ -226,16 +220,39 @@ impl StreamedPoses {
 /// the anchor's).
 pub(super) const MAX_POSE_DELAY_NS: u64 = 1_000_000_000;
 
+/// A pose channel of the input and its samples so far ([`StreamedPoses`]).
+struct PoseChannel {
+    topic: String,
+    id: u16,
+    channel_type: ChannelType,
+    samples: StreamedPoses,
+}
+
+impl PoseChannel {
+    fn new(topic: String, id: u16, channel_type: ChannelType) -> Self {
+        Self {
+            topic,
+            id,
+            channel_type,
+            samples: StreamedPoses::default(),
+        }
+    }
+
+    /// Notes that `message` (any input message, in read order) was read; when it is one of
+    /// this channel's, its decoded samples (the caller keeps those it wants).
+    fn read(&mut self, message: &RawMessage) -> Option<Result<Vec<PoseSample>>> {
+        self.samples.read(message.header.log_time);
+        (message.header.channel_id == self.id)
+            .then(|| decode_poses(self.channel_type, &self.topic, &message.data))
+    }
+}
+
 /// The [`OdometryAnchor`] channel, read from the same pass over the input as the images
 /// ([`StreamedPoses`]).
 pub(super) struct AnchorStream {
-    /// The channel's topic.
-    pub(super) topic: String,
-    channel_id: u16,
-    channel_type: ChannelType,
+    channel: PoseChannel,
     /// `--anchor-topic` named it: an unreadable message fails the file.
     required: bool,
-    samples: StreamedPoses,
     /// Messages left out because they did not decode (only when not required).
     pub(super) unreadable: Option<UnreadablePoses>,
 }
@@ -285,11 +302,8 @@ impl AnchorStream {
         decode_poses(channel_type, topic, &first.data).map_err(|e| unreadable(topic, required, e))?;
         // The first message is read again, in its turn, by `observe`.
         Ok(Some(Self {
-            topic: topic.clone(),
-            channel_id: channel.id,
-            channel_type,
+            channel: PoseChannel::new(topic.clone(), channel.id, channel_type),
             required,
-            samples: StreamedPoses::default(),
             unreadable: None,
         }))
     }
@@ -300,19 +314,16 @@ impl AnchorStream {
     /// A message of a required channel that does not decode ([`Error::AnchorPoses`]); one of an
     /// optional channel is left out and counted in [`Self::unreadable`].
     pub(super) fn observe(&mut self, message: &RawMessage) -> Result<()> {
-        self.samples.read(message.header.log_time);
-        if message.header.channel_id != self.channel_id {
-            return Ok(());
-        }
-        match decode_poses(self.channel_type, &self.topic, &message.data) {
-            Ok(samples) => {
-                for sample in samples {
-                    self.samples.insert(sample.timestamp_ns, sample.parent_from_child);
+        match self.channel.read(message) {
+            None => Ok(()),
+            Some(Ok(samples)) => {
+                for sample in &samples {
+                    self.channel.samples.insert(sample);
                 }
                 Ok(())
             }
-            Err(e) if self.required => Err(unreadable(&self.topic, true, e)),
-            Err(e) => {
+            Some(Err(e)) if self.required => Err(unreadable(&self.channel.topic, true, e)),
+            Some(Err(e)) => {
                 let u = self.unreadable.get_or_insert_with(|| UnreadablePoses {
                     messages: 0,
                     first_error: e.to_string(),
@@ -325,18 +336,23 @@ impl AnchorStream {
 
     /// The input has been read to its end.
     pub(super) fn finish(&mut self) {
-        self.samples.complete = true;
+        self.channel.samples.complete = true;
+    }
+
+    /// The channel's topic.
+    pub(super) fn topic(&self) -> &str {
+        &self.channel.topic
     }
 
     /// Whether the anchor pose of a frame stamped `stamp_ns` and logged at `log_time_ns` is
     /// known ([`StreamedPoses::settled`]).
     pub(super) fn settled(&self, stamp_ns: u64, log_time_ns: u64) -> bool {
-        self.samples.settled(stamp_ns, log_time_ns)
+        self.channel.samples.settled(stamp_ns, log_time_ns)
     }
 
     /// The samples read so far, sorted by stamp.
     pub(super) fn poses(&self) -> &[StampedPose] {
-        &self.samples.poses
+        &self.channel.samples.poses
     }
 }
 
@@ -375,11 +391,12 @@ mod tests {
 
     fn stream() -> AnchorStream {
         AnchorStream {
-            topic: "/groundtruth/pose".into(),
-            channel_id: CHANNEL,
-            channel_type: ChannelType::classify("foxglove.PoseInFrame", "protobuf").unwrap(),
+            channel: PoseChannel::new(
+                "/groundtruth/pose".into(),
+                CHANNEL,
+                ChannelType::classify("foxglove.PoseInFrame", "protobuf").unwrap(),
+            ),
             required: false,
-            samples: StreamedPoses::default(),
             unreadable: None,
         }
     }
