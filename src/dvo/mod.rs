@@ -576,6 +576,11 @@ pub struct DvoTracker {
     has_reference: bool,
     /// The last converged motion from one frame to the next.
     previous_motion: Option<Isometry3<f64>>,
+    /// The fraction of its reference's usable pixels the ignore mask removed when
+    /// `previous_motion` was estimated.
+    previous_motion_ignored_fraction: f64,
+    /// Motions estimated since the tracker was created or reset.
+    motions_since_start: usize,
     /// With keyframes: the previous frame's pose in the keyframe's camera (identity when the
     /// previous frame is the keyframe), and the frames tracked against the keyframe.
     previous_from_keyframe: Isometry3<f64>,
@@ -605,6 +610,8 @@ impl DvoTracker {
             previous,
             has_reference: false,
             previous_motion: None,
+            previous_motion_ignored_fraction: 0.0,
+            motions_since_start: 0,
             previous_from_keyframe: Isometry3::identity(),
             frames_on_keyframe: 0,
             new_reference: true,
@@ -637,6 +644,7 @@ impl DvoTracker {
     pub fn reset(&mut self) {
         self.has_reference = false;
         self.previous_motion = None;
+        self.motions_since_start = 0;
     }
 
     /// Adds a frame: returns the motion from the previous frame to this one (`None` for the
@@ -726,6 +734,17 @@ impl DvoTracker {
         } else {
             self.current.build(gray, depth_m)?;
         }
+        if let Some(p) = self.config().motion_prior {
+            // Far more ignored now than then, early on: the objects now masked pulled the last
+            // motion.
+            if self.motions_since_start <= p.startup_frames
+                && self.estimator.ignored_fraction - self.previous_motion_ignored_fraction
+                    > p.max_ignored_fraction_increase
+            {
+                self.previous_motion = None;
+            }
+        }
+        self.motions_since_start += 1;
         let prior = if self.config().init_from_previous_motion {
             self.previous_motion
         } else {
@@ -765,6 +784,7 @@ impl DvoTracker {
             Some(previous) => std::mem::swap(previous, &mut self.current),
         }
         self.previous_motion = estimate.is_converged().then_some(estimate.current_from_reference);
+        self.previous_motion_ignored_fraction = self.estimator.ignored_fraction;
         Ok(Some(estimate))
     }
 

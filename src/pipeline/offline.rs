@@ -239,10 +239,17 @@ impl Default for OfflineConfig {
 }
 
 impl OfflineConfig {
-    /// The default refinement DVO: the paper's weights with the motion prior.
+    /// The default refinement DVO: the paper's weights with the motion prior, whose prediction
+    /// is always the last motion: this pass ignores the masks of passes that looked ahead, so
+    /// its motions are estimated with the objects masked from their first frames, and more
+    /// ignored later means that objects came into view, not that they pulled the last motion
+    /// ([`MotionPriorConfig::max_ignored_fraction_increase`]: docs/method.md D13).
     pub fn paper_refinement_dvo() -> DvoConfig {
         DvoConfig {
-            motion_prior: Some(MotionPriorConfig::default()),
+            motion_prior: Some(MotionPriorConfig {
+                max_ignored_fraction_increase: 1.0,
+                ..MotionPriorConfig::default()
+            }),
             ..DvoConfig::paper()
         }
     }
