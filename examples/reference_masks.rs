@@ -12,9 +12,11 @@
 //! the camera's and `--camera FX,FY,CX,CY` (default TUM fr2) gives the intrinsics. `--score`
 //! reads `<colour time in seconds, 6 decimals>.png` masks and prints mean F1, precision and
 //! recall over frames whose reference is not empty (and the false-positive fraction of the
-//! others); `--write` writes the reference as `<time>.png`; `--overlay` writes colour images
-//! with true positives green, false positives red and misses blue. The overlays and reference
-//! images of a dataset carry its licence: keep them out of the repository.
+//! others), then how soon each person is masked (the reference's regions linked from frame to
+//! frame, [`occmask::metrics::onset::RegionTracker`]); `--write` writes the reference as
+//! `<time>.png`; `--overlay` writes colour images with true positives green, false positives
+//! red and misses blue. The overlays and reference images of a dataset carry its licence: keep
+//! them out of the repository.
 
 use std::path::PathBuf;
 
@@ -25,12 +27,19 @@ use occmask::dataset::{self, bonn, DatasetKind};
 use occmask::geometry::camera::presets;
 use occmask::image_buf::Mask;
 use occmask::metrics::free_space::{free_space_reference, FreeSpaceConfig, FreeSpaceView};
+use occmask::metrics::onset::{
+    OnsetSummary, OnsetTracker, RegionTracker, REFERENCE_REGION_MIN_IMAGE_FRACTION,
+};
 use occmask::metrics::SegmentationTally;
 use occmask::time::format_ns_as_seconds;
 use occmask::trajectory::interpolate;
 
 /// Ground-truth samples further apart than this around a frame are not interpolated.
 const MAX_POSE_GAP_NS: u64 = 100_000_000;
+
+/// A person's run counts as found promptly when half of it is masked within this many frames
+/// of its first (the synthetic failure classes' onset target).
+const PROMPT_ONSET_FRAMES: usize = 5;
 
 fn main() -> Result<()> {
     let mut args = std::env::args().skip(1);
@@ -101,6 +110,8 @@ fn main() -> Result<()> {
     }
     if let Some(predicted) = &score {
         let mut tally = SegmentationTally::default();
+        let mut regions = None;
+        let mut onsets = OnsetTracker::new();
         if let Some(out) = &overlay {
             std::fs::create_dir_all(out)?;
         }
@@ -110,6 +121,8 @@ fn main() -> Result<()> {
                 dataset::read_mask(&path).with_context(|| format!("predicted mask {}", path.display()))?;
             // The reference says nothing where the sensor saw no depth.
             tally.add_masks_where_depth_valid(&mask, truth_mask, &frames[i].depth_m)?;
+            let regions = regions.get_or_insert_with(|| RegionTracker::for_reference(truth_mask.size()));
+            onsets.add_frame(&regions.add_frame(truth_mask, &mask)?);
             if let Some(out) = &overlay {
                 let color = &sequence.color[pairs[i].color];
                 write_overlay(&color.path, &mask, truth_mask, &out.join(name(i)))?;
@@ -119,6 +132,11 @@ fn main() -> Result<()> {
         println!(
             "F1 {:.3}  precision {:.3}  recall {:.3}  ({} frames with moving objects; {} without, mean false-positive fraction {:.4})",
             s.mean_f1, s.mean_precision, s.mean_recall, s.frames_with_truth, s.empty_truth_frames, s.empty_truth_mean_fp_fraction
+        );
+        println!(
+            "people (reference regions of at least {} % of the image, linked frame to frame): {}",
+            100.0 * REFERENCE_REGION_MIN_IMAGE_FRACTION,
+            OnsetSummary::new(&onsets.runs(), PROMPT_ONSET_FRAMES)
         );
     }
     Ok(())

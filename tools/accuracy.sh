@@ -394,8 +394,29 @@ section_bonn_crowd_200() {
   echo "| pose source | mode | ATE RMSE | rotation RPE over 30 frames | mask F1 | precision | recall |"
   echo "|---|---|---|---|---|---|---|"
   sed -n 's/^.*bonn_crowd_200 \([A-Za-z]*\) \([A-Za-z_.,]*\): ATE \([0-9.]*\) m, rotation RPE (30 frames) \([0-9.]*\)°, masks F1 \([0-9.]*\) P \([0-9.]*\) R \([0-9.]*\)$/| \1 | \2 | \3 m | \4° | \5 | \6 | \7 |/p' "$WORK/bonn.txt" \
-    | sed 's/| DvoClosedLoop |/| DVO closed loop |/; s/| DvoUnmasked |/| DVO without the mask |/; s/| Offline |/| offline (default) |/; s/| Offline,far_layer.json |/| offline, far_layer.json (D21) |/; s/| Offline,full_resolution |/| offline, `--full-resolution` (D24) |/; s/| Causal |/| causal (`--causal`) |/'
+    | bonn_names
   echo
+  echo "How soon each person is masked: the reference's 8-connected regions of at least 0.5 % of the"
+  echo "image (1 536 pixels; smaller ones are slivers at the border or limbs cut off from their"
+  echo "body) are linked from frame to frame by the pixels they share (\`occmask::metrics::onset::RegionTracker\`)."
+  echo "A run starts where a region has no predecessor (a person enters, starts to move, or"
+  echo "splits off a region they shared with another) and ends where it has no successor; its onset"
+  echo "is the frames until half of it is masked, as for the synthetic classes. Same runs as above."
+  echo
+  echo "| pose source | mode | runs | half masked in their first frame | within 5 frames | the others: first–last frame, onset |"
+  echo "|---|---|---|---|---|---|"
+  sed -n 's/^.*bonn_crowd_200 people \([A-Za-z]*\) \([A-Za-z_.,]*\): runs \([0-9]*\), onset 0 in \([0-9]*\), ≤ 5 frames in \([0-9]*\); late: \(.*\)$/| \1 | \2 | \3 | \4 | \5 | \6 |/p' "$WORK/bonn.txt" \
+    | bonn_names
+  echo
+  echo "In the overlays (\`reference_masks --overlay\`), the run of frames 126–129 is a person leaving"
+  echo "the view at the right border, no longer masked; the runs of one frame are regions seen for"
+  echo "that frame only (at frame 60, a part of a person's region split off from it)."
+  echo
+}
+
+# The Bonn section's run names as the tables show them.
+bonn_names() {
+  sed 's/| DvoClosedLoop |/| DVO closed loop |/; s/| DvoUnmasked |/| DVO without the mask |/; s/| Offline |/| offline (default) |/; s/| Offline,far_layer.json |/| offline, far_layer.json (D21) |/; s/| Offline,full_resolution |/| offline, `--full-resolution` (D24) |/; s/| Causal |/| causal (`--causal`) |/'
 }
 
 {
