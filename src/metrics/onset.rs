@@ -186,8 +186,6 @@ pub struct RegionTracker {
     current_objects: Vec<u32>,
     /// Pixels of each object's region in the previous frame (0 when it had none).
     previous_pixels: Vec<usize>,
-    /// Scratch: (shared pixels, region, object) candidate links.
-    links: Vec<(usize, usize, u32)>,
 }
 
 impl RegionTracker {
@@ -200,7 +198,6 @@ impl RegionTracker {
             previous_objects: vec![0; size.area()],
             current_objects: vec![0; size.area()],
             previous_pixels: Vec::new(),
-            links: Vec::new(),
         }
     }
 
@@ -240,8 +237,9 @@ impl RegionTracker {
         let counted: Vec<usize> = (0..regions)
             .filter(|&k| self.labelling.pixels(k) >= self.min_region_pixels)
             .collect();
-        // Candidate links: pixels each counted region shares with each previous object.
-        self.links.clear();
+        // Candidate links (shared pixels, region, object): the pixels each counted region
+        // shares with each previous object.
+        let mut links = Vec::new();
         let mut shared: Vec<(u32, usize)> = Vec::new();
         for (r, &k) in counted.iter().enumerate() {
             shared.clear();
@@ -259,16 +257,15 @@ impl RegionTracker {
             let pixels = self.labelling.pixels(k);
             for &(object, n) in &shared {
                 if 2 * n >= pixels.min(self.previous_pixels[object as usize]) {
-                    self.links.push((n, r, object));
+                    links.push((n, r, object));
                 }
             }
         }
         // Greedy by shared pixels (ties: the earlier region, then the older object).
-        self.links
-            .sort_by_key(|&(n, r, object)| (std::cmp::Reverse(n), r, object));
+        links.sort_by_key(|&(n, r, object)| (std::cmp::Reverse(n), r, object));
         let mut object_of = vec![None; counted.len()];
         let mut taken = vec![false; self.previous_pixels.len()];
-        for &(_, r, object) in &self.links {
+        for &(_, r, object) in &links {
             if object_of[r].is_none() && !taken[object as usize] {
                 object_of[r] = Some(object);
                 taken[object as usize] = true;
