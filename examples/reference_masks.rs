@@ -28,7 +28,7 @@ use occmask::geometry::camera::presets;
 use occmask::image_buf::Mask;
 use occmask::metrics::free_space::{free_space_reference, FreeSpaceConfig, FreeSpaceView};
 use occmask::metrics::onset::{
-    OnsetSummary, OnsetTracker, RegionTracker, REFERENCE_REGION_MIN_IMAGE_FRACTION,
+    OnsetSummary, OnsetTracker, RegionTracker, ONSET_TARGET_FRAMES, REFERENCE_REGION_MIN_IMAGE_FRACTION,
 };
 use occmask::metrics::SegmentationTally;
 use occmask::time::format_ns_as_seconds;
@@ -36,10 +36,6 @@ use occmask::trajectory::interpolate;
 
 /// Ground-truth samples further apart than this around a frame are not interpolated.
 const MAX_POSE_GAP_NS: u64 = 100_000_000;
-
-/// A person's run counts as found promptly when half of it is masked within this many frames
-/// of its first (the synthetic failure classes' onset target).
-const PROMPT_ONSET_FRAMES: usize = 5;
 
 fn main() -> Result<()> {
     let mut args = std::env::args().skip(1);
@@ -136,7 +132,7 @@ fn main() -> Result<()> {
         println!(
             "people (reference regions of at least {} % of the image, linked frame to frame): {}",
             100.0 * REFERENCE_REGION_MIN_IMAGE_FRACTION,
-            OnsetSummary::new(&onsets.runs(), PROMPT_ONSET_FRAMES)
+            OnsetSummary::new(&onsets.runs(), ONSET_TARGET_FRAMES)
         );
     }
     Ok(())

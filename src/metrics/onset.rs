@@ -18,6 +18,11 @@ use crate::occlusion::runs::RunLabelling;
 /// Per-object recall that ends a run's onset: half of the object is in the mask.
 pub const ONSET_RECALL: f64 = 0.5;
 
+/// The onset target: an object is half masked within this many frames of starting to move or
+/// entering the view (the synthetic failure classes' bound, and what the real recordings'
+/// reports count as prompt).
+pub const ONSET_TARGET_FRAMES: usize = 5;
+
 /// One run of an object's ground truth (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct OnsetRun {

@@ -260,7 +260,7 @@ mod bonn_crowd {
     use occmask::dataset::{self, bonn, DatasetKind, DecodedPair};
     use occmask::image_buf::Mask;
     use occmask::metrics::free_space::{free_space_reference, FreeSpaceConfig, FreeSpaceView};
-    use occmask::metrics::onset::{OnsetSummary, OnsetTracker, RegionTracker};
+    use occmask::metrics::onset::{OnsetSummary, OnsetTracker, RegionTracker, ONSET_TARGET_FRAMES};
     use occmask::metrics::{ate, rpe, SegmentationSummary, SegmentationTally};
     use occmask::pipeline::PoseSource;
     use rayon::prelude::*;
@@ -309,10 +309,6 @@ mod bonn_crowd {
         }
     }
 
-    /// Onset (frames until half a person's reference region is masked) counts as prompt up to
-    /// this many frames: the target of the synthetic failure classes.
-    const PROMPT_ONSET_FRAMES: usize = 5;
-
     struct Run {
         poses: Vec<Isometry3<f64>>,
         masks: SegmentationSummary,
@@ -324,7 +320,7 @@ mod bonn_crowd {
 
     impl Run {
         /// The offline closed loop's pose bounds, `min_f1` on the masks, and at most
-        /// `max_late_runs` people's runs masked later than [`PROMPT_ONSET_FRAMES`] or never.
+        /// `max_late_runs` people's runs masked later than [`ONSET_TARGET_FRAMES`] or never.
         fn assert_offline_bounds(&self, what: &str, min_f1: f64, max_late_runs: usize) {
             assert!(
                 self.ate_m <= OFFLINE_ATE_BOUND_M,
@@ -409,7 +405,7 @@ mod bonn_crowd {
         for (mask, reference) in frame_masks.iter().zip(&sequence.reference) {
             onsets.add_frame(&regions.add_frame(reference, mask).unwrap());
         }
-        let people = OnsetSummary::new(&onsets.runs(), PROMPT_ONSET_FRAMES);
+        let people = OnsetSummary::new(&onsets.runs(), ONSET_TARGET_FRAMES);
         println!(
             "bonn_crowd_200 {source:?} {mode:?}{label}: ATE {ate_m:.4} m, rotation RPE (30 frames) {rotation_rpe_30_deg:.2}°, \
              masks F1 {:.3} P {:.3} R {:.3}",

@@ -17,6 +17,7 @@
 #![allow(clippy::unwrap_used)]
 
 use occmask::image_buf::ImageSize;
+use occmask::metrics::onset::ONSET_TARGET_FRAMES;
 use occmask::metrics::{FrameCounts, SegmentationSummary, SegmentationTally};
 use occmask::occlusion::{AppearanceGrowthConfig, OcclusionConfig, OcclusionDetector};
 use occmask::pipeline::ProcessorConfig;
@@ -168,8 +169,6 @@ fn static_control_has_almost_no_false_positives() {
 const CLASS_SIZE: ImageSize = ImageSize::new(320, 240);
 /// The target for the failure classes: mean F1 with DVO over all frames with an object.
 const CLASS_F1_TARGET: f64 = 0.85;
-/// The target onset: frames from an object's start of motion or entry until half of it is masked.
-const ONSET_TARGET_FRAMES: usize = 5;
 
 /// `scenario` at [`CLASS_SIZE`] through the default configuration in the default mode (offline,
 /// DVO closed loop).
