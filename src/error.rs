@@ -345,6 +345,16 @@ pub enum Error {
         appeared_while_writing: bool,
     },
 
+    /// An existing output was to be kept as a finished run, but it is not one made with the
+    /// same pose source and parameters.
+    #[error("output file {} exists but {problem}", path.display())]
+    ExistingOutputNotReusable {
+        /// The output path.
+        path: PathBuf,
+        /// What it is instead.
+        problem: ExistingOutputProblem,
+    },
+
     /// The dataset reader stopped before every image and pose was written (its own error, if it
     /// had one, is reported instead).
     #[error("conversion stopped after {done} of {total} images and poses")]
@@ -597,6 +607,42 @@ impl std::fmt::Display for MessageAt {
             self.sequence
         )
     }
+}
+
+/// Why an existing output is not a finished run with the given parameters
+/// ([`Error::ExistingOutputNotReusable`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ExistingOutputProblem {
+    /// Truncated, or without the summary section a finished output ends with.
+    #[error("is incomplete (truncated, or without its summary section)")]
+    Incomplete,
+    /// No `occmask.process` metadata record: not written by `occmask process`.
+    #[error("was not written by occmask process (it has no occmask.process metadata record)")]
+    NotProcessed,
+    /// Its `occmask.process` record holds no readable processor configuration.
+    #[error("records no readable processor configuration (an older or damaged occmask.process record)")]
+    NoConfiguration,
+    /// Made from another input (a recording of the same name, from another folder or day).
+    #[error("was made from another input: its {field} is {found} there and {expected} here")]
+    OtherInput {
+        /// The field of the input's identity: `input_messages` or `input_log_time_span_ns`.
+        field: String,
+        /// Its value in the existing output (`absent` when it has none).
+        found: String,
+        /// The value of this run's input.
+        expected: String,
+    },
+    /// Made with another pose source or parameters: the first field that differs.
+    #[error("was made with other parameters: {field} is {found} there and {expected} here")]
+    OtherParameters {
+        /// The field: `pose_source`, or a dotted path in the processor configuration.
+        field: String,
+        /// Its value in the existing output (JSON; `absent` when it has none).
+        found: String,
+        /// Its value in this run (JSON; `absent` when it has none).
+        expected: String,
+    },
 }
 
 /// What kind of image an encoding was refused for ([`DecodeProblem::UnsupportedEncoding`]).

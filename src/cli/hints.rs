@@ -38,6 +38,7 @@ pub fn flag_hint(error: &Error) -> Option<Cow<'static, str>> {
         } => "check --anchor-topic, or pass --no-anchor",
         Error::AnchorPoses { .. } => "pass --no-anchor to ignore the channel",
         Error::OutputExists { .. } => "pass --force to overwrite it",
+        Error::ExistingOutputNotReusable { .. } => "pass --force to replace it",
         Error::DepthNotRegistered { needed, .. } => match needed.as_ref() {
             RegistrationNeed::AlignedSameSize { .. } => {
                 "pass --depth-camera-info-topic TOPIC with the depth camera's calibration to register it"

@@ -22,8 +22,8 @@ use occmask::point_cloud::DEFAULT_POINT_STRIDE_PX;
 use occmask::process::batch::{available_cores, run_batch, ThreadBudget};
 use occmask::process::rectify::GeometryOptions;
 use occmask::process::{
-    process_file, OdometryAnchor, PipelineOptions, ProcessConfig, ProcessHooks, ProcessReport,
-    DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
+    check_existing_output, process_file, OdometryAnchor, PipelineOptions, ProcessConfig, ProcessHooks,
+    ProcessReport, DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
 };
 use occmask::time::{format_ns_as_seconds, parse_seconds_to_ns};
 use occmask::trajectory::{tum_line, StampedPose, TUM_HEADER};
@@ -45,10 +45,25 @@ struct Job {
     output: PathBuf,
 }
 
+/// What became of one input.
+enum FileOutcome {
+    /// Processed: its report (boxed: the other outcomes are small) and wall time (s).
+    Done(Box<ProcessReport>, f64),
+    /// Its existing output was kept (`--skip-existing`).
+    Kept,
+    /// Failed: the message to print.
+    Failed(String),
+}
+
 /// One input's result.
 struct JobResult {
     input: PathBuf,
-    outcome: Result<(ProcessReport, f64), String>,
+    outcome: FileOutcome,
+}
+
+/// `error` as printed: its chain, and the flag that fixes it.
+fn failure_text(error: anyhow::Error) -> String {
+    format!("{:#}", super::hints::with_hint(error))
 }
 
 fn output_name(input: &Path) -> PathBuf {
@@ -385,8 +400,32 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
             bar
         })
         .collect();
-    for job in &jobs {
-        if let Ok(input) = McapInput::open(&job.input) {
+    // --skip-existing: an input whose output is a finished run of it with these parameters is
+    // left out; one whose output exists but is not fails.
+    let settled: Vec<Option<FileOutcome>> = jobs
+        .iter()
+        .zip(&bars)
+        .map(|(job, bar)| {
+            if !(args.skip_existing && job.output.exists()) {
+                return None;
+            }
+            let checked = McapInput::open(&job.input)
+                .and_then(|input| check_existing_output(&job.output, &input, &config));
+            Some(match checked {
+                Ok(()) => {
+                    bar.finish_with_message("kept: its output exists");
+                    FileOutcome::Kept
+                }
+                Err(e) => {
+                    bar.abandon_with_message("FAILED");
+                    FileOutcome::Failed(failure_text(anyhow::Error::new(e)))
+                }
+            })
+        })
+        .collect();
+    let pending: Vec<usize> = (0..jobs.len()).filter(|&i| settled[i].is_none()).collect();
+    for &i in &pending {
+        if let Ok(input) = McapInput::open(&jobs[i].input) {
             total.inc_length(input.message_count().unwrap_or(0));
         }
     }
@@ -394,26 +433,41 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     // Each file in flight runs its pipeline on a rayon pool of its own share of the cores (so
     // with as many files as cores each file runs sequentially inside); the output bytes do not
     // depend on the split.
-    let budget = ThreadBudget::new(available_cores(), jobs.len(), args.jobs, args.threads_per_file)
+    let budget = ThreadBudget::new(available_cores(), pending.len(), args.jobs, args.threads_per_file)
         .context("--jobs/--threads-per-file")?;
-    let results = run_batch(jobs.len(), &budget, |i| {
+    let processed = run_batch(pending.len(), &budget, |k| {
+        let i = pending[k];
         let (job, bar) = (&jobs[i], &bars[i]);
         let start = Instant::now();
-        let outcome = run_one(job, &args, &config, &all_inputs, bar, &total)
-            .map(|r| (r, start.elapsed().as_secs_f64()))
-            .map_err(|e| format!("{:#}", super::hints::with_hint(e)));
-        match &outcome {
-            Ok(_) => bar.finish_with_message("done"),
-            Err(_) => bar.abandon_with_message("FAILED"),
-        }
-        JobResult {
-            input: job.input.clone(),
-            outcome,
+        match run_one(job, &args, &config, &all_inputs, bar, &total) {
+            Ok(report) => {
+                bar.finish_with_message("done");
+                FileOutcome::Done(Box::new(report), start.elapsed().as_secs_f64())
+            }
+            Err(e) => {
+                bar.abandon_with_message("FAILED");
+                FileOutcome::Failed(failure_text(e))
+            }
         }
     })?;
     total.finish();
+    // `run_batch` returns the pending inputs' outcomes in their order.
+    let mut processed = processed.into_iter();
+    let results: Vec<JobResult> = jobs
+        .iter()
+        .zip(settled)
+        .map(|(job, settled)| JobResult {
+            input: job.input.clone(),
+            outcome: settled.or_else(|| processed.next()).unwrap_or_else(|| {
+                FileOutcome::Failed("internal error: the batch returned no outcome".to_owned())
+            }),
+        })
+        .collect();
 
-    let failed = results.iter().filter(|r| r.outcome.is_err()).count();
+    let failed = results
+        .iter()
+        .filter(|r| matches!(r.outcome, FileOutcome::Failed(_)))
+        .count();
     if !globals.quiet {
         print_summary(&results, &jobs, &budget);
         if args.timings {
@@ -422,25 +476,30 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     }
     for r in &results {
         match &r.outcome {
-            Err(e) => eprintln!("error: {}: {e}", r.input.display()),
-            Ok((rep, _)) if !globals.quiet => {
+            FileOutcome::Failed(e) => eprintln!("error: {}: {e}", r.input.display()),
+            FileOutcome::Done(rep, _) if !globals.quiet => {
                 for w in report_warnings(&r.input, rep) {
                     eprintln!("warning: {w}");
                 }
             }
-            Ok(_) => {}
+            FileOutcome::Done(..) | FileOutcome::Kept => {}
         }
     }
     if super::signals::interrupted() {
         // Exit code 130 (main looks for Error::Interrupted): files finished before the signal
         // are complete; the unfinished ones removed their temporary output.
         let done = results.len() - failed;
+        let resume = if results.len() > 1 && done < results.len() {
+            "; run the same command with --skip-existing to process the others"
+        } else {
+            ""
+        };
         return Err(anyhow::Error::new(occmask::Error::Interrupted {
             done,
             total: results.len(),
         }))
         .context(format!(
-            "stopped by a signal: {done} of {} files were finished and kept",
+            "stopped by a signal: {done} of {} files were finished and kept{resume}",
             results.len()
         ));
     }
@@ -451,7 +510,7 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     // written from what could be read, and exit code 3 says that input was lost.
     if results
         .iter()
-        .any(|r| matches!(&r.outcome, Ok((rep, _)) if lost_input(rep)))
+        .any(|r| matches!(&r.outcome, FileOutcome::Done(rep, _) if lost_input(rep)))
     {
         return Ok(Outcome::DataLoss);
     }

@@ -24,7 +24,8 @@
 //! (calibration, depth scale, first images, image decoding), `poses` (what a pose source and
 //! the anchor read from the input), `pairing` (colour–depth pairing), `threads` (prefetch and
 //! writer threads), `frame_loop` (the loop over pairs), [`rectify`] (registration and
-//! undistortion), [`batch`] (several files in parallel); [`process_file`] here puts them
+//! undistortion), [`batch`] (several files in parallel), `existing` (whether an output that
+//! exists is a finished run of the same input and parameters); [`process_file`] here puts them
 //! together.
 
 use std::collections::{BTreeMap, VecDeque};
@@ -46,6 +47,7 @@ use crate::point_cloud::PointGrid;
 pub mod adapter;
 pub mod batch;
 pub mod config;
+mod existing;
 mod frame_loop;
 mod pairing;
 mod poses;
@@ -62,6 +64,7 @@ pub use config::{
     NoHooks, OdometryAnchor, ProcessConfig, ProcessHooks, DEFAULT_DEPTH_UNITS_PER_METER,
     DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
 };
+pub use existing::check_existing_output;
 pub use pairing::MAX_QUEUED_IMAGES;
 pub use report::{truncation_metadata, AnchorFrame, LoopTimings, ProcessReport, UnreadablePoses};
 pub use threads::{PREFETCH_BYTES, PREFETCH_MAX_MESSAGES, WRITE_QUEUE_BYTES, WRITE_QUEUE_MAX_OPS};
@@ -165,7 +168,7 @@ pub fn process_file<W: Write + Seek + Send>(
     let mut metadata = BTreeMap::from([
         ("tool".to_owned(), crate::mcap_io::LIBRARY.to_owned()),
         (
-            "pose_source".to_owned(),
+            existing::METADATA_POSE_SOURCE.to_owned(),
             config.processor.pose_source.as_str().to_owned(),
         ),
         ("color_topic".to_owned(), topics.color.topic.clone()),
@@ -180,13 +183,10 @@ pub fn process_file<W: Write + Seek + Send>(
         (DEPTH_UNITS_KEY.to_owned(), depth_units_per_meter.to_string()),
         (
             METADATA_PROCESSOR_CONFIG.to_owned(),
-            serde_json::to_string(&config.processor).map_err(|e| Error::InvalidParameter {
-                name: "processor config",
-                value: e.to_string(),
-                expected: "a configuration that serialises to JSON".into(),
-            })?,
+            existing::recorded_processor_config(&config.processor)?,
         ),
     ]);
+    metadata.extend(existing::input_identity(input));
     metadata.extend(geometry.metadata());
     if let Some(grid) = &point_grid {
         metadata.insert("points_stride_px".to_owned(), grid.stride_px().to_string());

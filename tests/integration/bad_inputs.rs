@@ -1074,6 +1074,18 @@ fn convert_output_problems() {
 /// is writing), lets it run `after` more, sends `signal`, and returns its output.
 #[cfg(unix)]
 fn interrupt(args: &[OsString], cwd: &Path, signal: libc::c_int, after: std::time::Duration) -> Output {
+    interrupt_when(args, cwd, signal, after, |_| true)
+}
+
+/// [`interrupt`], waiting also until `ready` holds for the names in `cwd`.
+#[cfg(unix)]
+fn interrupt_when(
+    args: &[OsString],
+    cwd: &Path,
+    signal: libc::c_int,
+    after: std::time::Duration,
+    ready: impl Fn(&[String]) -> bool,
+) -> Output {
     use std::time::{Duration, Instant};
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))
         .args(args)
@@ -1083,7 +1095,10 @@ fn interrupt(args: &[OsString], cwd: &Path, signal: libc::c_int, after: std::tim
         .spawn()
         .unwrap();
     let started = Instant::now();
-    while !entries(cwd).iter().any(|e| e.ends_with(".tmp")) {
+    while !{
+        let names = entries(cwd);
+        names.iter().any(|e| e.ends_with(".tmp")) && ready(&names)
+    } {
         assert!(
             child.try_wait().unwrap().is_none(),
             "finished before it could be interrupted"
@@ -1194,6 +1209,80 @@ fn interrupted_runs_leave_nothing_and_rerun_identically() {
         trajectory == std::fs::read_to_string(reference.join("traj.txt")).unwrap(),
         "trajectory re-run differs"
     );
+}
+
+/// A batch stopped by a signal keeps its finished files and says how to go on; run again with
+/// `--skip-existing`, it keeps them (not rewritten) and writes the others as an uninterrupted
+/// run does.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_batch_resumes_with_skip_existing() {
+    use std::os::unix::fs::MetadataExt;
+    use std::time::Duration;
+    let Some(desk) = common::real_data(
+        "tum_fr2_desk_50",
+        "bad_inputs::an_interrupted_batch_resumes_with_skip_existing",
+    ) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let (reference, work) = (tmp.path().join("reference"), tmp.path().join("work"));
+    std::fs::create_dir(&reference).unwrap();
+    std::fs::create_dir(&work).unwrap();
+    let input = tmp.path().join("desk.mcap");
+    let out = occmask_in(
+        &os(&[&"convert", &"tum", &desk, &"-o", &input, &"-q"]),
+        tmp.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let second = tmp.path().join("desk2.mcap");
+    std::fs::copy(&input, &second).unwrap();
+    // One file at a time, so the first is finished while the second is being written; the
+    // first second of each (30 frames) keeps this quick.
+    let batch = |extra: &[&str]| {
+        let mut args = os(&[
+            &"process",
+            &input,
+            &second,
+            &"--out-dir",
+            &".",
+            &"-j",
+            &"1",
+            &"--end",
+            &"1",
+        ]);
+        args.extend(extra.iter().map(OsString::from));
+        args
+    };
+    let out = occmask_in(&batch(&["-q"]), &reference);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+
+    let out = interrupt_when(&batch(&[]), &work, libc::SIGINT, Duration::ZERO, |names| {
+        names.iter().any(|n| n == "desk.occmask.mcap")
+    });
+    assert_interrupted("batch SIGINT", &out, &work, &["desk.occmask.mcap"]);
+    assert!(
+        stderr(&out)
+            .contains("1 of 2 files were finished and kept; run the same command with --skip-existing"),
+        "{}",
+        stderr(&out)
+    );
+    let first = work.join("desk.occmask.mcap");
+    let kept = std::fs::metadata(&first).unwrap();
+    let out = occmask_in(&batch(&["--skip-existing"]), &work);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(stderr(&out).contains("kept:"), "{}", stderr(&out));
+    let now = std::fs::metadata(&first).unwrap();
+    assert_eq!(
+        (now.ino(), now.modified().unwrap()),
+        (kept.ino(), kept.modified().unwrap())
+    );
+    for name in ["desk.occmask.mcap", "desk2.occmask.mcap"] {
+        assert!(
+            std::fs::read(work.join(name)).unwrap() == std::fs::read(reference.join(name)).unwrap(),
+            "{name} differs from the uninterrupted batch's"
+        );
+    }
 }
 
 fn occmask_in(args: &[OsString], cwd: &Path) -> Output {

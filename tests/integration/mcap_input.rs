@@ -92,3 +92,58 @@ fn errors_name_the_given_name() {
         .to_string();
     assert!(err.contains("empty"), "{err}");
 }
+
+/// The message count and log-time span (what `process` records of its input) are the messages'
+/// own, however the file is read: from the summary's statistics, from its chunk indexes when it
+/// has no statistics, or by the linear scan (no index, or cut short).
+#[test]
+fn message_count_and_log_time_span_are_those_of_the_messages_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let expect_own = |bytes: &[u8], what: &str| {
+        let input = McapInput::from_bytes(bytes, Path::new(what)).unwrap();
+        let messages = seen(&input).messages;
+        let times = messages.iter().map(|m| m.header.log_time);
+        let span = times.clone().min().zip(times.max());
+        assert!(span.is_some(), "{what}");
+        assert_eq!(input.message_count(), Some(messages.len() as u64), "{what}");
+        assert_eq!(input.log_time_span(), span, "{what}");
+    };
+    for flavor in ALL_FLAVORS {
+        for indexed in [true, false] {
+            let bytes = fixture_bytes(
+                flavor,
+                &FixtureSpec {
+                    indexed,
+                    ..FixtureSpec::default()
+                },
+            );
+            expect_own(&bytes, &format!("{flavor:?}, indexed {indexed}"));
+            expect_own(&bytes[..bytes.len() / 2], &format!("{flavor:?}, cut"));
+        }
+    }
+    // A summary without statistics: the span from the chunk indexes, no count.
+    let path = dir.path().join("no_stats.mcap");
+    let mut writer = mcap::WriteOptions::new()
+        .emit_statistics(false)
+        .chunk_size(Some(64))
+        .create(std::io::BufWriter::new(std::fs::File::create(&path).unwrap()))
+        .unwrap();
+    let channel = writer
+        .add_channel(0, "/t", "json", &std::collections::BTreeMap::new())
+        .unwrap();
+    for (sequence, log_time) in [(0, 30), (1, 10), (2, 50), (3, 20)] {
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence,
+            log_time,
+            publish_time: log_time,
+        };
+        writer.write_to_known_channel(&header, b"{}").unwrap();
+    }
+    writer.finish().unwrap();
+    drop(writer);
+    let input = McapInput::open(&path).unwrap();
+    assert!(input.is_indexed());
+    assert_eq!(input.message_count(), None);
+    assert_eq!(input.log_time_span(), Some((10, 50)));
+}

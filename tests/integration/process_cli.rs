@@ -1,5 +1,6 @@
 //! `occmask process` through the binary, with the real pipeline: batches where one file fails,
-//! overwrite and input-as-output refusals, exports, determinism and external poses.
+//! overwrite and input-as-output refusals, resuming with `--skip-existing`, exports, determinism
+//! and external poses.
 
 #![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
 
@@ -386,6 +387,127 @@ fn partial_config_keeps_the_defaults_of_each_place_and_unknown_fields_fail() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("max_iterations"), "{}", stderr(&out));
     assert!(!output.exists());
+}
+
+/// `--skip-existing` resumes a batch: an output that is a finished run of the same input and
+/// parameters is kept as it is (not rewritten) and its input left out; an output that exists
+/// but is not one fails its input with what it is and the flag that replaces it, and is not
+/// touched.
+#[cfg(unix)]
+#[test]
+fn skip_existing_keeps_finished_outputs_and_names_what_differs_in_the_others() {
+    use std::os::unix::fs::MetadataExt;
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Protobuf);
+    let b = fixture(dir.path(), "b.mcap", Flavor::Ros2);
+    let c = fixture(dir.path(), "c.mcap", Flavor::Json);
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let output = |name: &str| out_dir.join(format!("{name}.occmask.mcap"));
+    let process = |inputs: &[&Path], extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec!["process".into()];
+        args.extend(inputs.iter().map(|p| p.as_os_str().to_owned()));
+        args.extend(["--out-dir".into(), out_dir.clone().into_os_string()]);
+        args.extend(extra.iter().map(|s| s.into()));
+        occmask(&args)
+    };
+    // The file as it stands: its bytes, inode and modification time (a rewrite renames a new
+    // file into place).
+    let identity = |path: &Path| {
+        let m = std::fs::metadata(path).unwrap();
+        (std::fs::read(path).unwrap(), m.ino(), m.modified().unwrap())
+    };
+
+    let first = process(&[&a], &["-q"]);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let finished = identity(&output("a"));
+    // c's output: a file that `process` did not write (a copy of an input).
+    std::fs::copy(&c, output("c")).unwrap();
+    let foreign = identity(&output("c"));
+
+    let out = process(&[&a, &b, &c], &["--skip-existing"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("a.mcap") && err.contains("kept:"), "{err}");
+    assert!(err.contains("1 of 3 files failed"), "{err}");
+    assert!(
+        err.contains("c.occmask.mcap exists but was not written by occmask process")
+            && err.contains("pass --force to replace it"),
+        "{err}"
+    );
+    assert_eq!(identity(&output("a")), finished);
+    assert_eq!(identity(&output("c")), foreign);
+    assert!(occmask(&["eval".as_ref(), output("b").as_os_str()])
+        .status
+        .success());
+
+    // Other parameters: the first field that differs, with both values.
+    let config = dir.path().join("alpha.json");
+    std::fs::write(&config, r#"{"occlusion": {"alpha": 0.1}}"#).unwrap();
+    let out = process(
+        &[&a],
+        &["--skip-existing", "-q", "--config", config.to_str().unwrap()],
+    );
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("was made with other parameters: occlusion.alpha is 0.15 there and 0.1 here"),
+        "{err}"
+    );
+    let out = process(&[&a], &["--skip-existing", "-q", "--pose", "dvo-unmasked"]);
+    assert!(
+        stderr(&out).contains(r#"pose_source is "dvo" there and "dvo-unmasked" here"#),
+        "{}",
+        stderr(&out)
+    );
+    assert_eq!(identity(&output("a")), finished);
+
+    // A recording of the same name from another folder (one frame longer) is another input.
+    let elsewhere = dir.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let other_a = elsewhere.join("a.mcap");
+    let longer = FixtureSpec {
+        frames: spec().frames + 1,
+        ..spec()
+    };
+    std::fs::write(&other_a, fixture_bytes(Flavor::Protobuf, &longer)).unwrap();
+    let out = process(&[&other_a], &["--skip-existing", "-q"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("a.occmask.mcap exists but was made from another input: its input_log_time_span_ns is"),
+        "{err}"
+    );
+    assert_eq!(identity(&output("a")), finished);
+
+    // A cut copy of a finished output is not one.
+    let b_bytes = std::fs::read(output("b")).unwrap();
+    std::fs::write(output("c"), &b_bytes[..b_bytes.len() / 2]).unwrap();
+    let out = process(&[&c], &["--skip-existing", "-q"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("exists but is incomplete"),
+        "{}",
+        stderr(&out)
+    );
+
+    // With every output finished, the batch succeeds and writes nothing.
+    std::fs::remove_file(output("c")).unwrap();
+    let out = process(&[&c], &["-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let before: Vec<_> = ["a", "b", "c"].iter().map(|n| identity(&output(n))).collect();
+    let out = process(&[&a, &b, &c], &["--skip-existing", "-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let after: Vec<_> = ["a", "b", "c"].iter().map(|n| identity(&output(n))).collect();
+    assert_eq!(after, before);
+    assert_eq!(
+        files_in(&out_dir),
+        vec!["a.occmask.mcap", "b.occmask.mcap", "c.occmask.mcap"]
+    );
+
+    // Replacing and keeping exclude each other (a usage error).
+    let out = process(&[&a], &["--skip-existing", "--force"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
 }
 
 /// The offline mode processes VGA at 320×240 and writes masks at the input's size;

@@ -105,7 +105,7 @@ pub(super) fn print_timings(results: &[JobResult]) {
         "frame loop (s)", "loop", "pipeline", "rectify", "input wait", "output wait", "writer tail"
     );
     for r in results {
-        if let Ok((rep, _)) = &r.outcome {
+        if let FileOutcome::Done(rep, _) = &r.outcome {
             let t = &rep.timings;
             let name = r
                 .input
@@ -148,7 +148,7 @@ pub(super) fn print_summary(results: &[JobResult], jobs: &[Job], budget: &Thread
             .map(|j| j.output.display().to_string())
             .unwrap_or_default();
         match &r.outcome {
-            Ok((rep, secs)) => {
+            FileOutcome::Done(rep, secs) => {
                 let _ = writeln!(
                     out,
                     "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}{}",
@@ -166,7 +166,13 @@ pub(super) fn print_summary(results: &[JobResult], jobs: &[Job], budget: &Thread
                     }
                 );
             }
-            Err(_) => {
+            FileOutcome::Kept => {
+                let _ = writeln!(
+                    out,
+                    "{name:<32} kept: {output} exists, a finished run of it with these parameters"
+                );
+            }
+            FileOutcome::Failed(_) => {
                 let _ = writeln!(out, "{name:<32} FAILED (see below)");
             }
         }
@@ -174,7 +180,7 @@ pub(super) fn print_summary(results: &[JobResult], jobs: &[Job], budget: &Thread
     // What was done to the images: registration and undistortion change what the pipeline
     // saw, so they are never silent.
     for r in results {
-        if let Ok((rep, _)) = &r.outcome {
+        if let FileOutcome::Done(rep, _) = &r.outcome {
             if !rep.geometry.is_identity() {
                 let name = r
                     .input

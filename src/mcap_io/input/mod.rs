@@ -123,6 +123,8 @@ pub struct McapInput {
     linear_extras: Vec<ExtraRecord>,
     /// First message of each supported channel, collected by the linear scan.
     linear_first: BTreeMap<u16, RawMessage>,
+    /// The earliest and latest message log time, found by the linear scan.
+    linear_log_time_span: Option<(u64, u64)>,
     truncation: Option<Truncation>,
     file_len: u64,
 }
@@ -286,6 +288,7 @@ impl McapInput {
             channels: BTreeMap::new(),
             linear_extras: Vec::new(),
             linear_first: BTreeMap::new(),
+            linear_log_time_span: None,
             truncation: None,
             file_len,
         };
@@ -318,6 +321,7 @@ impl McapInput {
         let mut extras = Vec::new();
         let mut first = BTreeMap::new();
         let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
+        let mut span: Option<(u64, u64)> = None;
         let truncated = linear_records(&self.source, |record| {
             match record {
                 Record::Schema { header, data } => {
@@ -353,6 +357,8 @@ impl McapInput {
                 }
                 Record::Message { header, data } => {
                     *counts.entry(header.channel_id).or_default() += 1;
+                    let t = header.log_time;
+                    span = Some(span.map_or((t, t), |(first, last)| (first.min(t), last.max(t))));
                     let wanted = channels
                         .get(&header.channel_id)
                         .and_then(|c| c.channel_type)
@@ -389,6 +395,7 @@ impl McapInput {
         self.channels = channels;
         self.linear_extras = extras;
         self.linear_first = first;
+        self.linear_log_time_span = span;
         Ok(())
     }
 
@@ -451,6 +458,22 @@ impl McapInput {
         }
         ranges.push(Some((start, u64::MAX)));
         ranges
+    }
+
+    /// The earliest and latest message log time (ns), from the summary's statistics or chunk
+    /// indexes, or the linear scan; `None` for a file without messages.
+    pub fn log_time_span(&self) -> Option<(u64, u64)> {
+        let Some(summary) = &self.summary else {
+            return self.linear_log_time_span;
+        };
+        match &summary.stats {
+            Some(stats) if stats.message_count == 0 => None,
+            Some(stats) => Some((stats.message_start_time, stats.message_end_time)),
+            None => summary.chunk_indexes.iter().fold(None, |span, c| {
+                let (first, last) = span.unwrap_or((c.message_start_time, c.message_end_time));
+                Some((first.min(c.message_start_time), last.max(c.message_end_time)))
+            }),
+        }
     }
 
     /// Total messages, when known from the summary or the linear scan.
