@@ -345,8 +345,8 @@ pub enum Error {
         appeared_while_writing: bool,
     },
 
-    /// An existing output was to be kept as a finished run, but it is not one made with the
-    /// same pose source and parameters.
+    /// An existing output was to be kept as a finished run, but it is not one of the same input
+    /// with the same choices and parameters.
     #[error("output file {} exists but {problem}", path.display())]
     ExistingOutputNotReusable {
         /// The output path.
@@ -633,10 +633,12 @@ pub enum ExistingOutputProblem {
         /// The value of this run's input.
         expected: String,
     },
-    /// Made with another pose source or parameters: the first field that differs.
+    /// Made with other choices (topics, pose source, time range) or parameters: the first field
+    /// that differs.
     #[error("was made with other parameters: {field} is {found} there and {expected} here")]
     OtherParameters {
-        /// The field: `pose_source`, or a dotted path in the processor configuration.
+        /// The field: a key of the `occmask.process` record (`color_topic`, `pose_source`,
+        /// `end_offset_ns`, …), or a dotted path in the processor configuration.
         field: String,
         /// Its value in the existing output (JSON; `absent` when it has none).
         found: String,

@@ -6,9 +6,10 @@
 //! its final name was finished, unless someone else put a file there. What is compared is what
 //! the output's `occmask.process` metadata record holds of what decides its masks and poses:
 //! the input (its message count and log-time span, [`input_identity`]: a recording of the same
-//! name from another folder or day differs there), the pose source and the processor
-//! configuration. Its last such record is the run's own: an annotated copy writes the input's
-//! metadata records first.
+//! name from another folder or day differs there), the run's choices ([`run_choices`]: the
+//! colour and depth topics, the pose source, the time range) and the processor configuration.
+//! Its last such record is the run's own: an annotated copy writes the input's metadata records
+//! first.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -17,13 +18,22 @@ use serde_json::Value;
 
 use crate::error::{Error, ExistingOutputProblem, Result};
 use crate::mcap_io::annotate::{METADATA_PROCESS, METADATA_PROCESSOR_CONFIG};
+use crate::mcap_io::input::detect::{detect_topics, RgbdTopics};
 use crate::mcap_io::input::{ExtraRecord, McapInput};
 use crate::pipeline::ProcessorConfig;
 
+use super::poses::topic_overrides;
 use super::ProcessConfig;
 
 /// Key of the `occmask.process` record that names the pose source.
-pub(super) const METADATA_POSE_SOURCE: &str = "pose_source";
+const METADATA_POSE_SOURCE: &str = "pose_source";
+/// Keys of the `occmask.process` record that name the colour and depth topics.
+const METADATA_COLOR_TOPIC: &str = "color_topic";
+const METADATA_DEPTH_TOPIC: &str = "depth_topic";
+/// Keys of the `occmask.process` record: the time range processed (ns after the first frame),
+/// recorded only when given.
+const METADATA_START_OFFSET: &str = "start_offset_ns";
+const METADATA_END_OFFSET: &str = "end_offset_ns";
 /// Key of the `occmask.process` record: the input's message count.
 const METADATA_INPUT_MESSAGES: &str = "input_messages";
 /// Key of the `occmask.process` record: the input's first and last message log time,
@@ -43,6 +53,31 @@ pub(super) fn recorded_processor_config(processor: &ProcessorConfig) -> Result<S
     })
 }
 
+/// What the `occmask.process` record holds of the run's choices: the colour and depth topics,
+/// the pose source and the time range (its ends only when given).
+pub(super) fn run_choices(topics: &RgbdTopics, config: &ProcessConfig) -> BTreeMap<String, String> {
+    let offsets = [
+        (METADATA_START_OFFSET, config.start_offset_ns),
+        (METADATA_END_OFFSET, config.end_offset_ns),
+    ];
+    [
+        (METADATA_COLOR_TOPIC, topics.color.topic.clone()),
+        (METADATA_DEPTH_TOPIC, topics.depth.topic.clone()),
+        (
+            METADATA_POSE_SOURCE,
+            config.processor.pose_source.as_str().to_owned(),
+        ),
+    ]
+    .into_iter()
+    .chain(
+        offsets
+            .into_iter()
+            .filter_map(|(key, ns)| Some((key, ns?.to_string()))),
+    )
+    .map(|(key, value)| (key.to_owned(), value))
+    .collect()
+}
+
 /// What the `occmask.process` record holds of its input: the message count and the log-time
 /// span, where the input's summary or scan gives them. The same for a file and a copy of it
 /// that lost only its index (the messages are the same).
@@ -60,14 +95,15 @@ pub(super) fn input_identity(input: &McapInput) -> BTreeMap<String, String> {
 }
 
 /// Checks that the MCAP file at `path` is a complete output of `process_file` made from
-/// `input` with the pose source and processor configuration of `config` (the topics, exports
-/// and output format are not compared).
+/// `input` with the topics, pose source, time range and processor configuration of `config`
+/// (the calibration, registration and output options are not compared).
 ///
 /// # Errors
 /// [`Error::ExistingOutputNotReusable`] when it is truncated or has no summary, has no
 /// `occmask.process` record or none with a readable configuration, or was made from another
-/// input or with another pose source or parameters (the first field that differs is named);
-/// [`Error::Io`], [`Error::BadMcap`] and [`Error::Mcap`] when it cannot be read as MCAP.
+/// input or with other choices or parameters (the first field that differs is named);
+/// [`Error::Io`], [`Error::BadMcap`] and [`Error::Mcap`] when it cannot be read as MCAP; the
+/// errors of [`detect_topics`] when `input` has no RGB-D channels to process.
 pub fn check_existing_output(path: &Path, input: &McapInput, config: &ProcessConfig) -> Result<()> {
     let not_reusable = |problem| Error::ExistingOutputNotReusable {
         path: path.to_owned(),
@@ -77,43 +113,12 @@ pub fn check_existing_output(path: &Path, input: &McapInput, config: &ProcessCon
     if output.is_truncated() || !output.is_indexed() {
         return Err(not_reusable(ExistingOutputProblem::Incomplete));
     }
-    let record = output
-        .extras()?
-        .into_iter()
-        .filter_map(|extra| match extra {
-            ExtraRecord::Metadata(m) if m.name == METADATA_PROCESS => Some(m.metadata),
-            _ => None,
-        })
-        .next_back()
+    let record = last_process_record(output.extras()?)
         .ok_or_else(|| not_reusable(ExistingOutputProblem::NotProcessed))?;
-    for (key, value) in input_identity(input) {
-        let found = record.get(&key);
-        if found != Some(&value) {
-            return Err(not_reusable(ExistingOutputProblem::OtherInput {
-                field: key,
-                found: found.map_or("absent", String::as_str).to_owned(),
-                expected: value,
-            }));
-        }
-    }
-    let pose_source = config.processor.pose_source.as_str();
-    let found_pose_source = record.get(METADATA_POSE_SOURCE).map(String::as_str);
-    if found_pose_source != Some(pose_source) {
-        return Err(not_reusable(ExistingOutputProblem::OtherParameters {
-            field: METADATA_POSE_SOURCE.to_owned(),
-            found: found_pose_source.map_or_else(|| "absent".to_owned(), json_string),
-            expected: json_string(pose_source),
-        }));
-    }
-    let Some(Ok(found)) = record
-        .get(METADATA_PROCESSOR_CONFIG)
-        .map(|text| serde_json::from_str::<Value>(text))
-    else {
-        return Err(not_reusable(ExistingOutputProblem::NoConfiguration));
-    };
+    let choices = run_choices(&detect_topics(input, &topic_overrides(config))?, config);
     // Through the same text as the record: a value built from the configuration directly
     // would hold its f32 parameters widened (0.15 as 0.15000000596…), the record's as written.
-    let expected: Value =
+    let configuration: Value =
         serde_json::from_str(&recorded_processor_config(&config.processor)?).map_err(|e| {
             Error::InvalidParameter {
                 name: "processor config",
@@ -121,13 +126,72 @@ pub fn check_existing_output(path: &Path, input: &McapInput, config: &ProcessCon
                 expected: "JSON".into(),
             }
         })?;
-    match first_difference(&found, &expected, "") {
+    compare_record(&record, &input_identity(input), &choices, &configuration).map_err(not_reusable)
+}
+
+/// The last `occmask.process` record among `extras` (the run's own), its key/value pairs.
+fn last_process_record(extras: Vec<ExtraRecord>) -> Option<BTreeMap<String, String>> {
+    extras
+        .into_iter()
+        .filter_map(|extra| match extra {
+            ExtraRecord::Metadata(m) if m.name == METADATA_PROCESS => Some(m.metadata),
+            _ => None,
+        })
+        .next_back()
+}
+
+/// The run's choices that [`run_choices`] may record; one recorded but not made now differs too.
+const RUN_CHOICE_KEYS: [&str; 5] = [
+    METADATA_COLOR_TOPIC,
+    METADATA_DEPTH_TOPIC,
+    METADATA_POSE_SOURCE,
+    METADATA_START_OFFSET,
+    METADATA_END_OFFSET,
+];
+
+/// `record` against this run's input identity, choices and configuration (as JSON), in that
+/// order: the first difference.
+fn compare_record(
+    record: &BTreeMap<String, String>,
+    identity: &BTreeMap<String, String>,
+    choices: &BTreeMap<String, String>,
+    configuration: &Value,
+) -> std::result::Result<(), ExistingOutputProblem> {
+    for (key, value) in identity {
+        let found = record.get(key);
+        if found != Some(value) {
+            return Err(ExistingOutputProblem::OtherInput {
+                field: key.clone(),
+                found: found.map_or("absent", String::as_str).to_owned(),
+                expected: value.clone(),
+            });
+        }
+    }
+    for key in RUN_CHOICE_KEYS {
+        let (found, expected) = (record.get(key), choices.get(key));
+        if found != expected {
+            let shown =
+                |value: Option<&String>| value.map_or_else(|| "absent".to_owned(), |v| json_string(v));
+            return Err(ExistingOutputProblem::OtherParameters {
+                field: key.to_owned(),
+                found: shown(found),
+                expected: shown(expected),
+            });
+        }
+    }
+    let Some(Ok(found)) = record
+        .get(METADATA_PROCESSOR_CONFIG)
+        .map(|text| serde_json::from_str::<Value>(text))
+    else {
+        return Err(ExistingOutputProblem::NoConfiguration);
+    };
+    match first_difference(&found, configuration, "") {
         None => Ok(()),
-        Some((field, found, expected)) => Err(not_reusable(ExistingOutputProblem::OtherParameters {
+        Some((field, found, expected)) => Err(ExistingOutputProblem::OtherParameters {
             field,
             found,
             expected,
-        })),
+        }),
     }
 }
 
@@ -168,152 +232,162 @@ fn json_or_absent(value: Option<&Value>) -> String {
 mod tests {
     use super::*;
     use serde_json::json;
-    use std::collections::BTreeMap;
 
-    /// An MCAP file holding only `records` (name, key/value pairs) as metadata records.
-    fn with_metadata(dir: &Path, records: &[(&str, &[(&str, &str)])]) -> std::path::PathBuf {
-        let path = dir.join("out.mcap");
-        let mut writer = mcap::Writer::new(std::fs::File::create(&path).unwrap()).unwrap();
-        for (name, pairs) in records {
-            let metadata: BTreeMap<String, String> = pairs
-                .iter()
-                .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
-                .collect();
-            writer
-                .write_metadata(&mcap::records::Metadata {
-                    name: (*name).to_owned(),
-                    metadata,
-                })
-                .unwrap();
-        }
-        writer.finish().unwrap();
-        path
+    fn map(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
+        pairs
+            .iter()
+            .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
+            .collect()
     }
 
-    /// [`check_existing_output`] of the file at `path` as the output of itself: a file of
-    /// metadata records only, whose identity is its message count, 0.
-    fn check(path: &Path, config: &ProcessConfig) -> Result<()> {
-        let input = McapInput::open(path).unwrap();
-        assert_eq!(
-            input_identity(&input),
-            BTreeMap::from([(METADATA_INPUT_MESSAGES.to_owned(), "0".to_owned())])
-        );
-        check_existing_output(path, &input, config)
+    /// This run's identity, choices and configuration, and a record that matches them.
+    struct Run {
+        identity: BTreeMap<String, String>,
+        choices: BTreeMap<String, String>,
+        configuration_text: String,
+        configuration: Value,
     }
 
-    fn problem(result: Result<()>) -> ExistingOutputProblem {
-        match result {
-            Err(Error::ExistingOutputNotReusable { problem, .. }) => problem,
-            other => panic!("expected ExistingOutputNotReusable, found {other:?}"),
-        }
-    }
-
-    /// The run's own record is the last: an annotated copy of an output holds its input's
-    /// record before it.
-    #[test]
-    fn the_last_process_record_decides() {
-        let dir = tempfile::tempdir().unwrap();
-        let config = ProcessConfig::default();
-        let own = recorded_processor_config(&config.processor).unwrap();
-        let pose_source = config.processor.pose_source.as_str();
-        let other = own.replace("\"mode\":\"offline\"", "\"mode\":\"causal\"");
-        assert_ne!(other, own);
-        let path = with_metadata(
-            dir.path(),
-            &[
-                (
-                    METADATA_PROCESS,
-                    &[
-                        (METADATA_INPUT_MESSAGES, "0"),
-                        (METADATA_POSE_SOURCE, pose_source),
-                        (METADATA_PROCESSOR_CONFIG, &other),
-                    ],
-                ),
-                (
-                    METADATA_PROCESS,
-                    &[
-                        (METADATA_INPUT_MESSAGES, "0"),
-                        (METADATA_POSE_SOURCE, pose_source),
-                        (METADATA_PROCESSOR_CONFIG, &own),
-                    ],
-                ),
-            ],
-        );
-        check(&path, &config).unwrap();
-        let path = with_metadata(
-            dir.path(),
-            &[(
-                METADATA_PROCESS,
-                &[
-                    (METADATA_INPUT_MESSAGES, "0"),
-                    (METADATA_POSE_SOURCE, pose_source),
-                    (METADATA_PROCESSOR_CONFIG, &other),
-                ],
-            )],
-        );
-        assert_eq!(
-            problem(check(&path, &config)),
-            ExistingOutputProblem::OtherParameters {
-                field: "mode".into(),
-                found: "\"causal\"".into(),
-                expected: "\"offline\"".into(),
+    impl Run {
+        fn new() -> Self {
+            let configuration_text = recorded_processor_config(&ProcessorConfig::default()).unwrap();
+            Self {
+                identity: map(&[
+                    (METADATA_INPUT_MESSAGES, "40"),
+                    (METADATA_INPUT_LOG_TIME_SPAN, "10..90"),
+                ]),
+                choices: map(&[
+                    (METADATA_COLOR_TOPIC, "/rgb"),
+                    (METADATA_DEPTH_TOPIC, "/depth"),
+                    (METADATA_POSE_SOURCE, "dvo"),
+                ]),
+                configuration: serde_json::from_str(&configuration_text).unwrap(),
+                configuration_text,
             }
-        );
+        }
+
+        /// The record this run writes.
+        fn record(&self) -> BTreeMap<String, String> {
+            let mut record = self.identity.clone();
+            record.extend(self.choices.clone());
+            record.insert(
+                METADATA_PROCESSOR_CONFIG.to_owned(),
+                self.configuration_text.clone(),
+            );
+            record.insert("tool".to_owned(), "occmask".to_owned());
+            record
+        }
+
+        fn compare(
+            &self,
+            record: &BTreeMap<String, String>,
+        ) -> std::result::Result<(), ExistingOutputProblem> {
+            compare_record(record, &self.identity, &self.choices, &self.configuration)
+        }
     }
 
     #[test]
-    fn a_record_without_a_readable_configuration_is_named() {
-        let dir = tempfile::tempdir().unwrap();
-        let config = ProcessConfig::default();
-        let pose_source = config.processor.pose_source.as_str();
-        for pairs in [
-            &[
-                (METADATA_INPUT_MESSAGES, "0"),
-                (METADATA_POSE_SOURCE, pose_source),
-            ][..],
-            &[
-                (METADATA_INPUT_MESSAGES, "0"),
-                (METADATA_POSE_SOURCE, pose_source),
-                (METADATA_PROCESSOR_CONFIG, "{not json"),
-            ][..],
-        ] {
-            let path = with_metadata(dir.path(), &[(METADATA_PROCESS, pairs)]);
-            assert_eq!(
-                problem(check(&path, &config)),
-                ExistingOutputProblem::NoConfiguration
-            );
-        }
-        let path = with_metadata(dir.path(), &[("other", &[("a", "b")])]);
-        assert_eq!(
-            problem(check(&path, &config)),
-            ExistingOutputProblem::NotProcessed
-        );
+    fn the_record_the_run_writes_matches_it() {
+        let run = Run::new();
+        assert_eq!(run.compare(&run.record()), Ok(()));
     }
 
     /// An output of another input (a recording of the same name) is named by the first field
     /// of the input's identity that differs; one recorded without an identity differs too.
     #[test]
     fn an_output_of_another_input_is_not_kept() {
-        let dir = tempfile::tempdir().unwrap();
-        let config = ProcessConfig::default();
-        let own = recorded_processor_config(&config.processor).unwrap();
-        let pose_source = config.processor.pose_source.as_str();
-        for (messages, found) in [(Some("5"), "5"), (None, "absent")] {
-            let mut pairs = vec![
-                (METADATA_POSE_SOURCE, pose_source),
-                (METADATA_PROCESSOR_CONFIG, own.as_str()),
-            ];
-            pairs.extend(messages.map(|m| (METADATA_INPUT_MESSAGES, m)));
-            let path = with_metadata(dir.path(), &[(METADATA_PROCESS, &pairs)]);
-            assert_eq!(
-                problem(check(&path, &config)),
-                ExistingOutputProblem::OtherInput {
-                    field: METADATA_INPUT_MESSAGES.into(),
-                    found: found.into(),
-                    expected: "0".into(),
-                }
-            );
+        let run = Run::new();
+        let mut record = run.record();
+        record.insert(METADATA_INPUT_MESSAGES.to_owned(), "41".to_owned());
+        assert_eq!(
+            run.compare(&record),
+            Err(ExistingOutputProblem::OtherInput {
+                field: METADATA_INPUT_MESSAGES.into(),
+                found: "41".into(),
+                expected: "40".into(),
+            })
+        );
+        record.remove(METADATA_INPUT_LOG_TIME_SPAN);
+        assert_eq!(
+            run.compare(&record),
+            Err(ExistingOutputProblem::OtherInput {
+                field: METADATA_INPUT_LOG_TIME_SPAN.into(),
+                found: "absent".into(),
+                expected: "10..90".into(),
+            })
+        );
+    }
+
+    /// Another topic, pose source or time range, also one recorded but not chosen now.
+    #[test]
+    fn other_choices_are_named_with_both_values() {
+        let run = Run::new();
+        let mut record = run.record();
+        record.insert(METADATA_DEPTH_TOPIC.to_owned(), "/aligned_depth".to_owned());
+        assert_eq!(
+            run.compare(&record),
+            Err(ExistingOutputProblem::OtherParameters {
+                field: METADATA_DEPTH_TOPIC.into(),
+                found: "\"/aligned_depth\"".into(),
+                expected: "\"/depth\"".into(),
+            })
+        );
+        let mut record = run.record();
+        record.insert(METADATA_END_OFFSET.to_owned(), "1000000000".to_owned());
+        assert_eq!(
+            run.compare(&record),
+            Err(ExistingOutputProblem::OtherParameters {
+                field: METADATA_END_OFFSET.into(),
+                found: "\"1000000000\"".into(),
+                expected: "absent".into(),
+            })
+        );
+    }
+
+    #[test]
+    fn other_parameters_are_named_by_the_first_field_that_differs() {
+        let run = Run::new();
+        let mut record = run.record();
+        let causal = run
+            .configuration_text
+            .replace("\"mode\":\"offline\"", "\"mode\":\"causal\"");
+        assert_ne!(causal, run.configuration_text);
+        record.insert(METADATA_PROCESSOR_CONFIG.to_owned(), causal);
+        assert_eq!(
+            run.compare(&record),
+            Err(ExistingOutputProblem::OtherParameters {
+                field: "mode".into(),
+                found: "\"causal\"".into(),
+                expected: "\"offline\"".into(),
+            })
+        );
+        for unreadable in [None, Some("{not json")] {
+            let mut record = run.record();
+            match unreadable {
+                None => record.remove(METADATA_PROCESSOR_CONFIG),
+                Some(text) => record.insert(METADATA_PROCESSOR_CONFIG.to_owned(), text.to_owned()),
+            };
+            assert_eq!(run.compare(&record), Err(ExistingOutputProblem::NoConfiguration));
         }
+    }
+
+    /// The run's own record is the last: an annotated copy of an output holds its input's
+    /// record before it.
+    #[test]
+    fn the_last_process_record_is_the_runs_own() {
+        let metadata = |name: &str, value: &str| {
+            ExtraRecord::Metadata(mcap::records::Metadata {
+                name: name.to_owned(),
+                metadata: map(&[("k", value)]),
+            })
+        };
+        let extras = vec![
+            metadata(METADATA_PROCESS, "input's"),
+            metadata(METADATA_PROCESS, "own"),
+            metadata("other", "later"),
+        ];
+        assert_eq!(last_process_record(extras), Some(map(&[("k", "own")])));
+        assert_eq!(last_process_record(vec![metadata("other", "x")]), None);
     }
 
     #[test]

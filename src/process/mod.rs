@@ -168,12 +168,6 @@ pub fn process_file<W: Write + Seek + Send>(
     let mut metadata = BTreeMap::from([
         ("tool".to_owned(), crate::mcap_io::LIBRARY.to_owned()),
         (
-            existing::METADATA_POSE_SOURCE.to_owned(),
-            config.processor.pose_source.as_str().to_owned(),
-        ),
-        ("color_topic".to_owned(), topics.color.topic.clone()),
-        ("depth_topic".to_owned(), topics.depth.topic.clone()),
-        (
             "intrinsics".to_owned(),
             format!(
                 "{},{},{},{}",
@@ -186,6 +180,7 @@ pub fn process_file<W: Write + Seek + Send>(
             existing::recorded_processor_config(&config.processor)?,
         ),
     ]);
+    metadata.extend(existing::run_choices(&topics, config));
     metadata.extend(existing::input_identity(input));
     metadata.extend(geometry.metadata());
     if let Some(grid) = &point_grid {

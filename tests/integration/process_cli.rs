@@ -460,6 +460,12 @@ fn skip_existing_keeps_finished_outputs_and_names_what_differs_in_the_others() {
         "{}",
         stderr(&out)
     );
+    let out = process(&[&a], &["--skip-existing", "-q", "--end", "0.1"]);
+    assert!(
+        stderr(&out).contains(r#"end_offset_ns is absent there and "100000000" here"#),
+        "{}",
+        stderr(&out)
+    );
     assert_eq!(identity(&output("a")), finished);
 
     // A recording of the same name from another folder (one frame longer) is another input.

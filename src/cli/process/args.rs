@@ -203,11 +203,12 @@ pub struct ProcessArgs {
     pub force: bool,
 
     /// Keep an existing output and leave its input out, when it is a finished run of the same
-    /// input (message count and time span) with the same pose source and detector/DVO
-    /// parameters (outputs get their final name only when complete): resumes an interrupted or
-    /// partly failed batch. An existing output that is not one (incomplete, not written by
-    /// process, another input, other parameters) fails that input. Topic, calibration and time
-    /// range flags and the output format are not compared: after changing them, use --force.
+    /// input (message count and time span) with the same topics, pose source, --start/--end
+    /// and detector/DVO parameters (outputs get their final name only when complete): resumes
+    /// an interrupted or partly failed batch. An existing output that is not one (incomplete,
+    /// not written by process, another input, other choices) fails that input. Calibration and
+    /// registration flags and the output format are not compared: after changing them, use
+    /// --force.
     #[arg(long, conflicts_with_all = ["force", "export_trajectory", "export_masks"])]
     pub skip_existing: bool,
 
