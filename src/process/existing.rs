@@ -6,7 +6,7 @@
 //! its final name was finished, unless someone else put a file there. What is compared is what
 //! the output's `occmask.process` metadata record holds of what decides its masks and poses:
 //! the input (its message count and log-time span, [`input_identity`]: a recording of the same
-//! name from another folder or day differs there), the run's choices ([`run_choices`]: the
+//! name from another folder or day differs there), the run's choices ([`RunChoices`]: the
 //! colour and depth topics, the pose source, the time range) and the processor configuration.
 //! Its last such record is the run's own: an annotated copy writes the input's metadata records
 //! first.
@@ -53,29 +53,38 @@ pub(super) fn recorded_processor_config(processor: &ProcessorConfig) -> Result<S
     })
 }
 
-/// What the `occmask.process` record holds of the run's choices: the colour and depth topics,
-/// the pose source and the time range (its ends only when given).
-pub(super) fn run_choices(topics: &RgbdTopics, config: &ProcessConfig) -> BTreeMap<String, String> {
-    let offsets = [
-        (METADATA_START_OFFSET, config.start_offset_ns),
-        (METADATA_END_OFFSET, config.end_offset_ns),
-    ];
+/// The run's choices as the `occmask.process` record holds them: the colour and depth topics,
+/// the pose source and the time range, every key with its value (`None`: not recorded, an end
+/// of the time range not given).
+type RunChoices = [(&'static str, Option<String>); 5];
+
+/// The run's choices ([`RunChoices`]) for `topics` and `config`.
+fn run_choices(topics: &RgbdTopics, config: &ProcessConfig) -> RunChoices {
     [
-        (METADATA_COLOR_TOPIC, topics.color.topic.clone()),
-        (METADATA_DEPTH_TOPIC, topics.depth.topic.clone()),
+        (METADATA_COLOR_TOPIC, Some(topics.color.topic.clone())),
+        (METADATA_DEPTH_TOPIC, Some(topics.depth.topic.clone())),
         (
             METADATA_POSE_SOURCE,
-            config.processor.pose_source.as_str().to_owned(),
+            Some(config.processor.pose_source.as_str().to_owned()),
         ),
+        (
+            METADATA_START_OFFSET,
+            config.start_offset_ns.map(|ns| ns.to_string()),
+        ),
+        (METADATA_END_OFFSET, config.end_offset_ns.map(|ns| ns.to_string())),
     ]
-    .into_iter()
-    .chain(
-        offsets
-            .into_iter()
-            .filter_map(|(key, ns)| Some((key, ns?.to_string()))),
-    )
-    .map(|(key, value)| (key.to_owned(), value))
-    .collect()
+}
+
+/// The record's entries for the run's choices: those with a value.
+pub(super) fn recorded_run_choices(topics: &RgbdTopics, config: &ProcessConfig) -> BTreeMap<String, String> {
+    recorded(&run_choices(topics, config))
+}
+
+fn recorded(choices: &RunChoices) -> BTreeMap<String, String> {
+    choices
+        .iter()
+        .filter_map(|(key, value)| Some(((*key).to_owned(), value.clone()?)))
+        .collect()
 }
 
 /// What the `occmask.process` record holds of its input: the message count and the log-time
@@ -140,21 +149,12 @@ fn last_process_record(extras: Vec<ExtraRecord>) -> Option<BTreeMap<String, Stri
         .next_back()
 }
 
-/// The run's choices that [`run_choices`] may record; one recorded but not made now differs too.
-const RUN_CHOICE_KEYS: [&str; 5] = [
-    METADATA_COLOR_TOPIC,
-    METADATA_DEPTH_TOPIC,
-    METADATA_POSE_SOURCE,
-    METADATA_START_OFFSET,
-    METADATA_END_OFFSET,
-];
-
 /// `record` against this run's input identity, choices and configuration (as JSON), in that
 /// order: the first difference.
 fn compare_record(
     record: &BTreeMap<String, String>,
     identity: &BTreeMap<String, String>,
-    choices: &BTreeMap<String, String>,
+    choices: &RunChoices,
     configuration: &Value,
 ) -> std::result::Result<(), ExistingOutputProblem> {
     for (key, value) in identity {
@@ -167,13 +167,14 @@ fn compare_record(
             });
         }
     }
-    for key in RUN_CHOICE_KEYS {
-        let (found, expected) = (record.get(key), choices.get(key));
+    // Every key: one recorded but not chosen now differs too.
+    for (key, expected) in choices {
+        let (found, expected) = (record.get(*key), expected.as_ref());
         if found != expected {
             let shown =
                 |value: Option<&String>| value.map_or_else(|| "absent".to_owned(), |v| json_string(v));
             return Err(ExistingOutputProblem::OtherParameters {
-                field: key.to_owned(),
+                field: (*key).to_owned(),
                 found: shown(found),
                 expected: shown(expected),
             });
@@ -243,7 +244,7 @@ mod tests {
     /// This run's identity, choices and configuration, and a record that matches them.
     struct Run {
         identity: BTreeMap<String, String>,
-        choices: BTreeMap<String, String>,
+        choices: RunChoices,
         configuration_text: String,
         configuration: Value,
     }
@@ -256,11 +257,13 @@ mod tests {
                     (METADATA_INPUT_MESSAGES, "40"),
                     (METADATA_INPUT_LOG_TIME_SPAN, "10..90"),
                 ]),
-                choices: map(&[
-                    (METADATA_COLOR_TOPIC, "/rgb"),
-                    (METADATA_DEPTH_TOPIC, "/depth"),
-                    (METADATA_POSE_SOURCE, "dvo"),
-                ]),
+                choices: [
+                    (METADATA_COLOR_TOPIC, Some("/rgb".to_owned())),
+                    (METADATA_DEPTH_TOPIC, Some("/depth".to_owned())),
+                    (METADATA_POSE_SOURCE, Some("dvo".to_owned())),
+                    (METADATA_START_OFFSET, None),
+                    (METADATA_END_OFFSET, None),
+                ],
                 configuration: serde_json::from_str(&configuration_text).unwrap(),
                 configuration_text,
             }
@@ -269,7 +272,7 @@ mod tests {
         /// The record this run writes.
         fn record(&self) -> BTreeMap<String, String> {
             let mut record = self.identity.clone();
-            record.extend(self.choices.clone());
+            record.extend(recorded(&self.choices));
             record.insert(
                 METADATA_PROCESSOR_CONFIG.to_owned(),
                 self.configuration_text.clone(),

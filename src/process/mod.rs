@@ -180,7 +180,7 @@ pub fn process_file<W: Write + Seek + Send>(
             existing::recorded_processor_config(&config.processor)?,
         ),
     ]);
-    metadata.extend(existing::run_choices(&topics, config));
+    metadata.extend(existing::recorded_run_choices(&topics, config));
     metadata.extend(existing::input_identity(input));
     metadata.extend(geometry.metadata());
     if let Some(grid) = &point_grid {
