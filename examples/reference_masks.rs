@@ -2,7 +2,7 @@
 //! scores of `occmask process --export-masks` masks against them.
 //!
 //! ```sh
-//! occmask convert tum DATA/bonn_crowd_200 -o crowd.mcap --camera 542.822841,542.576870,315.593520,237.756098
+//! occmask convert bonn DATA/bonn_crowd_200 -o crowd.mcap
 //! occmask process crowd.mcap -o crowd.occmask.mcap --export-masks /tmp/masks
 //! cargo run --release --example reference_masks -- DATA/bonn_crowd_200 --bonn \
 //!     --score /tmp/masks [--write /tmp/reference] [--overlay /tmp/overlay]
@@ -57,35 +57,34 @@ fn main() -> Result<()> {
         }
     }
     let dir = dir.context("usage: reference_masks DIR [--bonn] [--camera FX,FY,CX,CY] [--score DIR] [--write DIR] [--overlay DIR]")?;
-    let sequence = dataset::tum::load(&dir, DatasetKind::Tum)?;
+    // A Bonn sequence's ground truth is converted from its marker's poses to the camera's.
+    let sequence = if is_bonn {
+        bonn::load(&dir)?
+    } else {
+        dataset::tum::load(&dir, DatasetKind::Tum)?
+    };
     let intrinsics = camera.map(|c| c.intrinsics).unwrap_or(if is_bonn {
         bonn::INTRINSICS
     } else {
         presets::TUM_FR2
     });
-    let truth = if is_bonn {
-        bonn::camera_poses(&sequence.groundtruth)
-    } else {
-        sequence.groundtruth.clone()
-    };
+    let truth = &sequence.groundtruth;
     let pairs = sequence.association(20_000_000).pairs;
     let frames = pairs
         .par_iter()
-        .map(|p| dataset::decode_pair(&sequence, p, DatasetKind::Tum.default_depth_units_per_meter()))
+        .map(|p| dataset::decode_pair(&sequence, p, sequence.kind.default_depth_units_per_meter()))
         .collect::<occmask::Result<Vec<_>>>()?;
     // Frames the ground truth covers, with the camera pose when the depth was taken.
     let covered: Vec<usize> = (0..frames.len())
-        .filter(|&i| interpolate(&truth, frames[i].depth_timestamp_ns, MAX_POSE_GAP_NS).is_some())
+        .filter(|&i| interpolate(truth, frames[i].depth_timestamp_ns, MAX_POSE_GAP_NS).is_some())
         .collect();
     let views: Vec<FreeSpaceView> = covered
         .iter()
         .filter_map(|&i| {
             let f = &frames[i];
-            interpolate(&truth, f.depth_timestamp_ns, MAX_POSE_GAP_NS).map(|world_from_camera| {
-                FreeSpaceView {
-                    depth_m: &f.depth_m,
-                    world_from_camera,
-                }
+            interpolate(truth, f.depth_timestamp_ns, MAX_POSE_GAP_NS).map(|world_from_camera| FreeSpaceView {
+                depth_m: &f.depth_m,
+                world_from_camera,
             })
         })
         .collect();

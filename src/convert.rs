@@ -56,8 +56,9 @@ pub struct ResolvedIntrinsics {
     pub distortion: Option<LensDistortion>,
 }
 
-/// Chooses intrinsics: `--camera` if given, else the dataset family's camera (LARR, ICSL),
-/// else a TUM camera named in the folder (`freiburg2`, `fr2`), else the Kinect default.
+/// Chooses intrinsics: `--camera` if given, else the dataset family's camera (LARR, ICSL, Bonn:
+/// pinhole, as TUM's `fr1`/`fr2`, docs/method.md "Datasets"), else a TUM camera named in the
+/// folder (`freiburg2`, `fr2`), else the Kinect default.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for an unparsable `camera`.
@@ -75,6 +76,11 @@ pub fn resolve_intrinsics(
         match kind {
             DatasetKind::Larr => (presets::LARR, "LARR dataset page".to_owned(), false),
             DatasetKind::Icsl => (presets::ICSL, "ICSL (main.m)".to_owned(), false),
+            DatasetKind::Bonn => (
+                presets::BONN,
+                "Bonn RGB-D Dynamic calibration (pinhole; --camera bonn adds its lens distortion)".to_owned(),
+                false,
+            ),
             DatasetKind::Tum => {
                 match camera_from_folder_name(folder_name)
                     .and_then(|n| camera_preset(n).map(|c| (n, c.intrinsics)))
@@ -482,7 +488,7 @@ pub fn convert_sequence<W: Write + Seek>(
         })
         .unwrap_or(0);
     let PinholeIntrinsics { fx, fy, cx, cy } = intrinsics;
-    let metadata = BTreeMap::from(
+    let mut metadata = BTreeMap::from(
         [
             ("dataset_kind", seq.kind.as_str().to_owned()),
             ("sequence_name", seq.name.clone()),
@@ -519,6 +525,12 @@ pub fn convert_sequence<W: Write + Seek>(
         ]
         .map(|(k, v)| (k.to_owned(), v)),
     );
+    if seq.kind == DatasetKind::Bonn && !seq.groundtruth.is_empty() {
+        metadata.insert(
+            "groundtruth_conversion".to_owned(),
+            dataset::bonn::groundtruth_conversion(),
+        );
+    }
     writer.write_metadata(METADATA_CONVERT, metadata)?;
     writer.attach(
         "occmask_association.txt",

@@ -385,7 +385,7 @@ section_bonn_crowd_200() {
   echo "elsewhere). Command (the same runs that hold the test's bounds):"
   echo "\`OCCMASK_DATA=DIR cargo test --release --test integration detector_real::bonn -- --nocapture\`;"
   echo "\`cargo run --release --example reference_masks -- DIR --bonn --score MASKDIR\` scores the"
-  echo "masks of \`occmask process --export-masks MASKDIR\` against the same reference."
+  echo "masks of \`occmask process --export-masks MASKDIR\` against the same reference (on a file from \`occmask convert bonn DIR\`)."
   echo
   if [ ! -d "$DATA/bonn_crowd_200" ]; then missing bonn_crowd_200; return; fi
   # One thread: the runs print in the order of the tests' names, each line whole.

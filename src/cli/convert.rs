@@ -24,6 +24,7 @@ Examples:
   occmask convert tum fixtures/tum_fr2_desk_10 -o desk.mcap
   occmask convert tum rgbd_dataset_freiburg3_walking_xyz -o walking.mcap --compression lz4
   occmask convert icsl icsl_seq1 -o icsl.mcap
+  occmask convert bonn rgbd_bonn_crowd -o crowd.mcap
   occmask convert larr dynamic_board -o board.mcap --force";
 
 const TUM_EXAMPLES: &str = "\
@@ -41,6 +42,18 @@ Examples:
 
 Same layout as TUM (rgb.txt, depth.txt, groundtruth.txt); depth in millimetres (1000 units per
 metre) and the ICSL camera (537.6, 539.0, 316.1, 245.5) unless overridden.";
+
+const BONN_EXAMPLES: &str = "\
+Examples:
+  occmask convert bonn rgbd_bonn_crowd -o crowd.mcap
+  occmask convert bonn rgbd_bonn_crowd -o crowd.mcap --camera bonn
+
+Same layout as TUM (rgb.txt, depth.txt, groundtruth.txt; depth 5000 units per metre). The
+dataset's camera (542.82, 542.58, 315.59, 237.76) as a pinhole unless overridden (--camera bonn
+adds its lens distortion, which process then undistorts). Its groundtruth.txt holds the poses
+of a motion-capture marker: /groundtruth/pose gets the camera's, converted as the dataset's own
+code does (the marker-to-camera transform, translations divided by 1.0593), so that process
+anchors the odometry and eval scores it against the camera.";
 
 const LARR_EXAMPLES: &str = "\
 Examples:
@@ -69,22 +82,27 @@ pub enum Dataset {
     /// ICSL sequences: TUM layout, depth 1000 units/m, ICSL camera.
     #[command(after_help = ICSL_EXAMPLES)]
     Icsl(TumArgs),
+    /// Bonn RGB-D Dynamic: TUM layout, Bonn camera, marker ground truth converted to the camera.
+    #[command(after_help = BONN_EXAMPLES)]
+    Bonn(TumArgs),
     /// LARR RGB-D layout (Kim et al.): rgb/, depth/, groundtruth mask/ named by time.
     #[command(after_help = LARR_EXAMPLES)]
     Larr(LarrArgs),
 }
 
-/// Arguments of `convert tum` and `convert icsl`.
+/// Arguments of `convert tum`, `convert icsl` and `convert bonn`.
 #[derive(Debug, ClapArgs)]
 pub struct TumArgs {
     #[command(flatten)]
     pub common: CommonArgs,
 
-    /// Camera intrinsics: fr1, fr2, fr3, icsl, larr, kinect-default, or FX,FY,CX,CY in pixels.
+    /// Camera: fr1, fr2, fr3, fr1-distorted, fr2-distorted, icsl, larr, bonn, kinect-default, or
+    /// FX,FY,CX,CY in pixels, optionally followed by distortion K1,K2,P1,P2[,K3] (plumb_bob) or
+    /// K1,K2,P1,P2,K3,K4,K5,K6 (rational_polynomial), written into the calibration messages.
     #[arg(long, value_parser = parse_camera_arg)]
     pub camera: Option<String>,
 
-    /// Raw depth units per metre [default: 5000 for tum, 1000 for icsl].
+    /// Raw depth units per metre [default: 5000 for tum and bonn, 1000 for icsl].
     #[arg(long, value_parser = parse_positive)]
     pub depth_units_per_meter: Option<f64>,
 }
@@ -139,6 +157,7 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let (kind, common, camera, depth_units) = match args.dataset {
         Dataset::Tum(a) => (DatasetKind::Tum, a.common, a.camera, a.depth_units_per_meter),
         Dataset::Icsl(a) => (DatasetKind::Icsl, a.common, a.camera, a.depth_units_per_meter),
+        Dataset::Bonn(a) => (DatasetKind::Bonn, a.common, a.camera, a.depth_units_per_meter),
         Dataset::Larr(a) => (
             DatasetKind::Larr,
             a.common,
@@ -154,9 +173,18 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let started = Instant::now();
     let seq = match kind {
         DatasetKind::Tum | DatasetKind::Icsl => dataset::tum::load(&common.dir, kind),
+        DatasetKind::Bonn => dataset::bonn::load(&common.dir),
         DatasetKind::Larr => dataset::larr::load(&common.dir),
     }
     .with_context(|| format!("cannot read {kind} dataset {}", common.dir.display()))?;
+    if kind == DatasetKind::Tum && dataset::bonn::named_like_bonn(&seq.name) && !seq.groundtruth.is_empty() {
+        warn(format!(
+            "{:?} looks like a Bonn RGB-D Dynamic sequence, whose groundtruth.txt holds a motion-capture \
+             marker's poses, not the camera's: written as they are; `occmask convert bonn` converts them \
+             and uses the dataset's camera",
+            seq.name
+        ));
+    }
 
     let intrinsics = resolve_intrinsics(kind, &seq.name, camera.as_deref())?;
     if intrinsics.is_fallback {

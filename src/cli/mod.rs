@@ -30,7 +30,7 @@ pub struct Args {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Convert an RGB-D dataset folder (TUM, ICSL, LARR) into an MCAP file for Foxglove.
+    /// Convert an RGB-D dataset folder (TUM, ICSL, Bonn, LARR) into an MCAP file for Foxglove.
     Convert(convert::ConvertArgs),
     /// Annotate RGB-D MCAP files with moving-object masks and odometry (several in parallel).
     Process(Box<process::ProcessArgs>),

@@ -11,8 +11,12 @@
 //! each depth image into the frames 5 and 15 later: 41 % of the pixels land within 3 cm of the
 //! depth measured there with the conversion, 25 % with the raw poses taken as the camera's.
 
+use std::path::Path;
+
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
+use super::{DatasetKind, Sequence, TUM_DEPTH_UNITS_PER_METER};
+use crate::error::Result;
 use crate::geometry::PinholeIntrinsics;
 use crate::trajectory::StampedPose;
 
@@ -21,7 +25,7 @@ use crate::trajectory::StampedPose;
 pub const INTRINSICS: PinholeIntrinsics = crate::geometry::camera::presets::BONN;
 
 /// Depth PNG units per metre (as TUM).
-pub const DEPTH_UNITS_PER_METER: f64 = 5000.0;
+pub const DEPTH_UNITS_PER_METER: f64 = TUM_DEPTH_UNITS_PER_METER;
 
 /// The scale of the motion capture's translations relative to the camera's (the determinant's
 /// cube root of the published T_m).
@@ -57,6 +61,35 @@ pub fn camera_poses(ground_truth: &[StampedPose]) -> Vec<StampedPose> {
         .collect()
 }
 
+/// Lists a sequence folder of the dataset (TUM layout, see [`super::tum::load`]), its ground
+/// truth converted to the camera's poses ([`camera_poses`]), as [`Sequence::groundtruth`]
+/// holds them for every dataset.
+///
+/// # Errors
+/// Those of [`super::tum::load`].
+pub fn load(root: &Path) -> Result<Sequence> {
+    let mut sequence = super::tum::load(root, DatasetKind::Bonn)?;
+    sequence.groundtruth = camera_poses(&sequence.groundtruth);
+    Ok(sequence)
+}
+
+/// How [`load`] converts the ground truth, in words (for the metadata of a converted file).
+pub fn groundtruth_conversion() -> String {
+    format!(
+        "groundtruth.txt holds the motion-capture marker's poses; /groundtruth/pose holds the camera's: \
+         world_from_marker · marker_from_camera, translations divided by {GROUND_TRUTH_SCALE} (the \
+         conversion published with the dataset, occmask::dataset::bonn)"
+    )
+}
+
+/// Whether a folder name looks like one of the dataset's sequences (`rgbd_bonn_crowd`): a
+/// `bonn` token, told apart by anything not a letter or digit.
+pub fn named_like_bonn(folder_name: &str) -> bool {
+    folder_name
+        .split(|c: char| !c.is_ascii_alphanumeric())
+        .any(|token| token.eq_ignore_ascii_case("bonn"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,5 +110,15 @@ mod tests {
             (c[1].world_from_camera.translation.vector - c[0].world_from_camera.translation.vector).norm();
         assert!((step - 1.0).abs() < 1e-9, "{step}");
         assert!((marker_from_camera().rotation.norm() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn folder_names_of_the_dataset_are_recognised_by_their_bonn_token() {
+        for name in ["rgbd_bonn_crowd", "rgbd_bonn_balloon2", "Bonn-crowd", "bonn"] {
+            assert!(named_like_bonn(name), "{name}");
+        }
+        for name in ["bonnet_desk", "rgbd_dataset_freiburg3_walking_xyz", "carbonn", ""] {
+            assert!(!named_like_bonn(name), "{name}");
+        }
     }
 }

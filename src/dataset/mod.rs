@@ -53,6 +53,9 @@ pub enum DatasetKind {
     Icsl,
     /// LARR RGB-D dataset (Kim et al.).
     Larr,
+    /// Bonn RGB-D Dynamic dataset: TUM layout, 5000 depth units per metre, its own camera, and
+    /// motion-capture poses of a marker that [`bonn::load`] converts to the camera's.
+    Bonn,
 }
 
 impl DatasetKind {
@@ -62,13 +65,14 @@ impl DatasetKind {
             DatasetKind::Tum => "tum",
             DatasetKind::Icsl => "icsl",
             DatasetKind::Larr => "larr",
+            DatasetKind::Bonn => "bonn",
         }
     }
 
     /// Raw depth units per metre of the family's PNGs.
     pub fn default_depth_units_per_meter(self) -> f64 {
         match self {
-            DatasetKind::Tum => TUM_DEPTH_UNITS_PER_METER,
+            DatasetKind::Tum | DatasetKind::Bonn => TUM_DEPTH_UNITS_PER_METER,
             DatasetKind::Icsl | DatasetKind::Larr => MILLIMETER_DEPTH_UNITS_PER_METER,
         }
     }

@@ -7,8 +7,9 @@ use crate::error::{Error, Result};
 
 use super::{folder_name, read_groundtruth, read_image_list, require_dir, DatasetKind, Sequence};
 
-/// Lists a TUM-layout folder. `kind` is [`DatasetKind::Tum`] or [`DatasetKind::Icsl`] (same
-/// layout, different units and camera).
+/// Lists a TUM-layout folder. `kind` is [`DatasetKind::Tum`], [`DatasetKind::Icsl`] or
+/// [`DatasetKind::Bonn`] (same layout, different units and camera; a Bonn sequence's ground
+/// truth is converted by [`super::bonn::load`]).
 ///
 /// # Errors
 /// [`Error::DatasetLayout`] when the folder or a list file is missing or a list is empty;

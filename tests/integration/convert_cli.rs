@@ -12,6 +12,7 @@ use foxglove::messages as fm;
 use occmask::mcap_io::codec::timestamp_ns;
 use occmask::mcap_io::{
     SCHEMA_COMPRESSED_IMAGE, TOPIC_COLOR_IMAGE, TOPIC_DEPTH_IMAGE, TOPIC_GROUNDTRUTH_MASK,
+    TOPIC_GROUNDTRUTH_POSE,
 };
 
 /// Converts `dir` (TUM layout unless `args` say otherwise) into `<tmp>/out.mcap`.
@@ -152,6 +153,7 @@ fn help_has_examples() {
         &["convert", "--help"][..],
         &["convert", "tum", "--help"],
         &["convert", "larr", "--help"],
+        &["convert", "bonn", "--help"],
     ] {
         let out = occmask(args);
         assert_eq!(out.status.code(), Some(0));
@@ -510,6 +512,85 @@ fn icsl_uses_millimetres_and_the_icsl_camera() {
     assert_eq!(md["intrinsics_fx_fy_cx_cy"], "537.6,539,316.1,245.5");
     let depth = input.channel_by_topic(TOPIC_DEPTH_IMAGE).unwrap();
     assert_eq!(depth.metadata["depth_units_per_meter"], "1000");
+}
+
+/// The `/groundtruth/pose` messages of a converted file: stamp and pose.
+fn groundtruth_poses(path: &Path) -> Vec<(u64, nalgebra::Isometry3<f64>)> {
+    let input = recording::open(path);
+    recording::messages(&input)
+        .iter()
+        .filter(|m| m.topic == TOPIC_GROUNDTRUTH_POSE)
+        .map(|m| {
+            let message: fm::PoseInFrame = m.decode();
+            let pose = message.pose.unwrap();
+            let (t, q) = (pose.position.unwrap(), pose.orientation.unwrap());
+            let world_from_camera = nalgebra::Isometry3::from_parts(
+                nalgebra::Translation3::new(t.x, t.y, t.z),
+                nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
+            );
+            (timestamp_ns(message.timestamp.as_ref()), world_from_camera)
+        })
+        .collect()
+}
+
+/// `convert bonn` writes the camera's ground truth (the marker poses of groundtruth.txt through
+/// `dataset::bonn::camera_poses`) and the dataset's camera as a pinhole (`--camera bonn`: with
+/// its distortion); `convert tum` on a folder so named writes the marker's poses as they are and
+/// says that `convert bonn` converts them.
+#[test]
+fn bonn_writes_the_camera_ground_truth_and_the_bonn_camera() {
+    use occmask::dataset::{bonn, read_groundtruth};
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tum_from_fixture(tmp.path(), "rgbd_bonn_mini");
+    let marker = read_groundtruth(&dir.join("groundtruth.txt")).unwrap();
+    let output = tmp.path().join("out.mcap");
+    let out = convert("bonn", &dir, &output, &["-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let md = &recording::metadata(&recording::open(&output))[0].metadata;
+    assert_eq!(md["dataset_kind"], "bonn");
+    assert_eq!(md["depth_units_per_meter"], "5000");
+    assert_eq!(
+        md["intrinsics_fx_fy_cx_cy"],
+        "542.822841,542.57687,315.59352,237.756098"
+    );
+    assert_eq!(md["distortion"], "none");
+    assert!(md["groundtruth_conversion"].contains("marker"), "{md:?}");
+
+    let written = groundtruth_poses(&output);
+    let expected = bonn::camera_poses(&marker);
+    assert_eq!(written.len(), marker.len());
+    for ((t, pose), truth) in written.iter().zip(&expected) {
+        assert_eq!(*t, truth.timestamp_ns);
+        let error = (pose.to_homogeneous() - truth.world_from_camera.to_homogeneous()).norm();
+        assert!(error < 1e-9, "{t}: {pose} against {}", truth.world_from_camera);
+    }
+    // The conversion moved the poses: the marker sits centimetres from the camera, turned.
+    let moved = (written[0].1.inverse() * marker[0].world_from_camera)
+        .rotation
+        .angle();
+    assert!(moved > 0.5, "{moved} rad");
+
+    let out = convert("bonn", &dir, &output, &["-q", "--force", "--camera", "bonn"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let md = &recording::metadata(&recording::open(&output))[0].metadata;
+    assert!(md["distortion"].starts_with("plumb_bob"), "{md:?}");
+
+    let as_tum = tmp.path().join("tum.mcap");
+    let out = convert("tum", &dir, &as_tum, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("`occmask convert bonn` converts them"),
+        "{}",
+        stderr(&out)
+    );
+    let written = groundtruth_poses(&as_tum);
+    assert!(written
+        .iter()
+        .zip(&marker)
+        .all(
+            |((_, pose), truth)| (pose.to_homogeneous() - truth.world_from_camera.to_homogeneous()).norm()
+                < 1e-9
+        ));
 }
 
 #[cfg(unix)]

@@ -257,7 +257,7 @@ fn seven_scenes_redkitchen_offline_closed_loop_finds_the_colour_unregistered() {
 /// (`occmask::dataset::bonn`).
 mod bonn_crowd {
     use super::*;
-    use occmask::dataset::{self, bonn, DatasetKind, DecodedPair};
+    use occmask::dataset::{self, bonn, DecodedPair};
     use occmask::image_buf::Mask;
     use occmask::metrics::free_space::{free_space_reference, FreeSpaceConfig, FreeSpaceView};
     use occmask::metrics::onset::{OnsetSummary, OnsetTracker, RegionTracker, ONSET_TARGET_FRAMES};
@@ -282,17 +282,16 @@ mod bonn_crowd {
     }
 
     fn load(dir: &Path) -> Sequence {
-        let sequence = dataset::tum::load(dir, DatasetKind::Tum).unwrap();
-        let truth = bonn::camera_poses(&sequence.groundtruth);
+        let sequence = bonn::load(dir).unwrap();
+        let truth = &sequence.groundtruth;
         let frames: Vec<DecodedPair> = sequence
             .association(20_000_000)
             .pairs
             .par_iter()
             .map(|p| dataset::decode_pair(&sequence, p, bonn::DEPTH_UNITS_PER_METER).unwrap())
             .collect();
-        let at = |t: u64| {
-            interpolate(&truth, t, MAX_POSE_GAP_NS).expect("the window is inside the motion capture")
-        };
+        let at =
+            |t: u64| interpolate(truth, t, MAX_POSE_GAP_NS).expect("the window is inside the motion capture");
         let views: Vec<FreeSpaceView> = frames
             .iter()
             .map(|f| FreeSpaceView {
