@@ -396,6 +396,9 @@ section_bonn_crowd_200() {
   sed -n 's/^.*bonn_crowd_200 \([A-Za-z]*\) \([A-Za-z_.,]*\): ATE \([0-9.]*\) m, rotation RPE (30 frames) \([0-9.]*\)°, masks F1 \([0-9.]*\) P \([0-9.]*\) R \([0-9.]*\)$/| \1 | \2 | \3 m | \4° | \5 | \6 | \7 |/p' "$WORK/bonn.txt" \
     | bonn_names
   echo
+  echo "The closed loop's ATE is one draw: a camera 1 px different moves it as much as the offline closed-loop"
+  echo "rows here differ from one another (method.md, \"Datasets\", has the figures)."
+  echo
   echo "How soon each person is masked: the reference's 8-connected regions of at least 0.5 % of the"
   echo "image (1 536 pixels; smaller ones are slivers at the border or limbs cut off from their"
   echo "body) are linked from frame to frame by the pixels they share (\`occmask::metrics::onset::RegionTracker\`)."
