@@ -403,3 +403,66 @@ fn external_poses_are_read_with_the_images_and_frames_wait_for_late_samples() {
     assert_eq!((report.frames, report.outside_pose_stream), (21, 39));
     assert_eq!(odometry[..], prompt.2[..21]);
 }
+
+/// A user's commands on real people walking past a hand-held camera (the Bonn "crowd" window):
+/// `convert bonn`, `process` with the default closed loop and with `--pose dvo-unmasked`, and
+/// `eval --json` against the camera's ground truth that `convert bonn` writes. Measured: ATE
+/// 0.042 m closed loop, 0.702 m unmasked. The closed loop's ATE moves to 0.046–0.064 m when the
+/// camera is 1 px different or undistorted (method.md, "Datasets"), so the bounds are the
+/// targets: at most 0.08 m, and at most a third of unmasked DVO's.
+#[test]
+fn bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path() {
+    use crate::common::{occmask, real_data, stderr};
+    let Some(src) = real_data(
+        "bonn_crowd_200",
+        "process_eval::bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path",
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let converted = dir.path().join("crowd.mcap");
+    let out = occmask(&[
+        "convert".as_ref(),
+        "bonn".as_ref(),
+        src.as_os_str(),
+        "-o".as_ref(),
+        converted.as_os_str(),
+        "-q".as_ref(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    // ATE and the frame-to-frame rotation error (RPE over 1 frame, degrees) of one run.
+    let scores = |name: &str, pose_args: &[&str]| -> (f64, f64) {
+        let output = dir.path().join(name);
+        let mut args = vec![
+            "process".as_ref(),
+            converted.as_os_str(),
+            "-o".as_ref(),
+            output.as_os_str(),
+            "-q".as_ref(),
+        ];
+        args.extend(pose_args.iter().map(std::ffi::OsStr::new));
+        let out = occmask(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let out = occmask(&["eval".as_ref(), "--json".as_ref(), output.as_os_str()]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["odometry"]["ate"]["poses"], 200, "{v}");
+        assert_eq!(v["odometry"]["rpe"][0]["delta_frames"], 1, "{v}");
+        let rotation_deg = v["odometry"]["rpe"][0]["rotation_rmse_deg"].as_f64().unwrap();
+        (v["odometry"]["ate"]["rmse_m"].as_f64().unwrap(), rotation_deg)
+    };
+    let (closed_loop, rotation_deg) = scores("closed.mcap", &[]);
+    let (unmasked, _) = scores("unmasked.mcap", &["--pose", "dvo-unmasked"]);
+    eprintln!(
+        "bonn_crowd_200 through the commands: ATE closed loop {closed_loop:.4} m (RPE over 1 frame \
+         {rotation_deg:.3}°), unmasked {unmasked:.4} m"
+    );
+    assert!(closed_loop <= 0.08, "closed loop ATE {closed_loop} m");
+    // Against the camera: 0.31° measured. Against the marker's poses taken as the camera's (what
+    // `convert tum` writes), whose axes are turned against the camera's, the same run: 0.57°.
+    assert!(rotation_deg <= 0.45, "RPE over 1 frame {rotation_deg}°");
+    assert!(
+        closed_loop <= unmasked / 3.0,
+        "closed loop {closed_loop} m, unmasked {unmasked} m"
+    );
+}
