@@ -15,19 +15,6 @@ use occmask::mcap_io::{
     TOPIC_GROUNDTRUTH_POSE,
 };
 
-/// Converts `dir` (TUM layout unless `args` say otherwise) into `<tmp>/out.mcap`.
-fn convert(kind: &str, dir: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
-    let mut args: Vec<String> = vec![
-        "convert".into(),
-        kind.into(),
-        dir.display().to_string(),
-        "-o".into(),
-        out.display().to_string(),
-    ];
-    args.extend(extra.iter().map(|s| s.to_string()));
-    occmask(&args)
-}
-
 /// Asserts a failed conversion: exit code 1, `needles` all in stderr, and no output or
 /// temporary file left in the output's directory.
 fn assert_fails(out: &std::process::Output, output: &Path, needles: &[&str]) {

@@ -34,14 +34,7 @@ fn tum_fr2_desk_round_trips_exactly() {
     let src = tum_fixture();
     let tmp = tempfile::tempdir().unwrap();
     let out_path = tmp.path().join("desk.mcap");
-    let out = occmask(&[
-        "convert".as_ref(),
-        "tum".as_ref(),
-        src.as_os_str(),
-        "-o".as_ref(),
-        out_path.as_os_str(),
-        "-q".as_ref(),
-    ]);
+    let out = convert("tum", &src, &out_path, &["-q"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
 
     let rgb = list(&src, "rgb.txt");

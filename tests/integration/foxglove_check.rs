@@ -119,14 +119,7 @@ fn processed_tum_output_passes_the_foxglove_check() {
     let converted = dir.path().join("desk.mcap");
     let processed = dir.path().join("desk.out.mcap");
     let data = tum_fixture();
-    let run = occmask(&[
-        "convert".as_ref(),
-        "tum".as_ref(),
-        data.as_os_str(),
-        "-o".as_ref(),
-        converted.as_os_str(),
-        "--quiet".as_ref(),
-    ]);
+    let run = convert("tum", &data, &converted, &["--quiet"]);
     assert!(run.status.success(), "{}", stderr(&run));
     let run = occmask(&[
         "process".as_ref(),

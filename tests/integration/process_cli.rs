@@ -5,9 +5,9 @@
 #![allow(clippy::unwrap_used)] // helpers outside #[test] fns: a panic is the failure report
 
 use crate::common::mcap_fixture as process_support;
+use crate::common::{convert, occmask, stderr};
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use occmask::image_buf::ImageSize;
 use process_support::*;
@@ -30,14 +30,7 @@ fn fixture(dir: &Path, name: &str, flavor: Flavor) -> PathBuf {
 /// The TUM excerpt converted into `dir` (`desk.mcap`).
 fn converted_tum_fixture(dir: &Path) -> PathBuf {
     let desk = dir.join("desk.mcap");
-    let out = occmask(&[
-        "convert".as_ref(),
-        "tum".as_ref(),
-        crate::common::data::tum_fixture().as_os_str(),
-        "-q".as_ref(),
-        "-o".as_ref(),
-        desk.as_os_str(),
-    ]);
+    let out = convert("tum", &crate::common::data::tum_fixture(), &desk, &["-q"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     desk
 }
@@ -51,17 +44,6 @@ fn recorded_processor_config(output: &Path) -> occmask::pipeline::ProcessorConfi
         .find(|m| m.name == METADATA_PROCESS)
         .unwrap();
     serde_json::from_str(&process.metadata[METADATA_PROCESSOR_CONFIG]).unwrap()
-}
-
-fn occmask<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_occmask"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 fn files_in(dir: &Path) -> Vec<String> {
@@ -582,16 +564,7 @@ fn an_unregistered_recording_is_reported_and_a_registered_one_is_not() {
         return;
     };
     let kitchen = tmp.path().join("kitchen.mcap");
-    let out = occmask(&[
-        "convert".as_ref(),
-        "tum".as_ref(),
-        src.as_os_str(),
-        "--camera".as_ref(),
-        "585,585,320,240".as_ref(),
-        "-q".as_ref(),
-        "-o".as_ref(),
-        kitchen.as_os_str(),
-    ]);
+    let out = convert("tum", &src, &kitchen, &["--camera", "585,585,320,240", "-q"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     let annotated = tmp.path().join("kitchen.out.mcap");
     let out = occmask(&[

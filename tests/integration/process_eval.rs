@@ -412,7 +412,7 @@ fn external_poses_are_read_with_the_images_and_frames_wait_for_late_samples() {
 /// targets: at most 0.08 m, and at most a third of unmasked DVO's.
 #[test]
 fn bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path() {
-    use crate::common::{occmask, real_data, stderr};
+    use crate::common::{convert, occmask, real_data, stderr};
     let Some(src) = real_data(
         "bonn_crowd_200",
         "process_eval::bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path",
@@ -421,14 +421,7 @@ fn bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path() {
     };
     let dir = tempfile::tempdir().unwrap();
     let converted = dir.path().join("crowd.mcap");
-    let out = occmask(&[
-        "convert".as_ref(),
-        "bonn".as_ref(),
-        src.as_os_str(),
-        "-o".as_ref(),
-        converted.as_os_str(),
-        "-q".as_ref(),
-    ]);
+    let out = convert("bonn", &src, &converted, &["-q"]);
     assert!(out.status.success(), "{}", stderr(&out));
     // ATE and the frame-to-frame rotation error (RPE over 1 frame, degrees) of one run.
     let scores = |name: &str, pose_args: &[&str]| -> (f64, f64) {

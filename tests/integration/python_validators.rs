@@ -87,11 +87,6 @@ fn validate(python: &Path, file: &Path, script: &str, args: &[&str]) {
     );
 }
 
-fn convert(args: &[&std::ffi::OsStr]) {
-    let out = occmask(args);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-}
-
 #[test]
 fn converted_files_pass_doctor_and_the_python_reader() {
     let Some(python) = python() else { return };
@@ -99,14 +94,8 @@ fn converted_files_pass_doctor_and_the_python_reader() {
 
     let desk = tmp.path().join("desk.mcap");
     let src = tum_fixture();
-    convert(&[
-        "convert".as_ref(),
-        "tum".as_ref(),
-        src.as_os_str(),
-        "-o".as_ref(),
-        desk.as_os_str(),
-        "-q".as_ref(),
-    ]);
+    let out = convert("tum", &src, &desk, &["-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     validate(
         &python,
         &desk,
@@ -124,18 +113,13 @@ fn converted_files_pass_doctor_and_the_python_reader() {
     for compression in ["lz4", "none"] {
         let larr = tmp.path().join(format!("larr-{compression}.mcap"));
         let fixture = larr_fixture();
-        convert(&[
-            "convert".as_ref(),
-            "larr".as_ref(),
-            fixture.as_os_str(),
-            "-o".as_ref(),
-            larr.as_os_str(),
-            "--camera".as_ref(),
-            FIXTURE_CAMERA.as_ref(),
-            "--compression".as_ref(),
-            compression.as_ref(),
-            "-q".as_ref(),
-        ]);
+        let out = convert(
+            "larr",
+            &fixture,
+            &larr,
+            &["--camera", FIXTURE_CAMERA, "--compression", compression, "-q"],
+        );
+        assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
         validate(
             &python,
             &larr,

@@ -41,6 +41,19 @@ pub fn occmask<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
         .expect("cannot start the occmask binary")
 }
 
+/// Runs `occmask convert KIND DIR -o OUT` with `extra` arguments after them.
+pub fn convert(kind: &str, dir: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "convert".as_ref(),
+        kind.as_ref(),
+        dir.as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ];
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
+    occmask(&args)
+}
+
 /// Runs `occmask args` with stdout a pipe whose reader is already gone (`occmask … | head` once
 /// head has exited) and asserts that the process ended on SIGPIPE, as a Unix filter does, with
 /// no panic message; `what` names the case in the assertion messages.
