@@ -9,9 +9,15 @@
 //!   Δ = 150 frames (or the longest the sequence allows), `evaluate_rpe.py` semantics, and ATE
 //!   after rigid alignment, with ground truth interpolated to the estimated stamps.
 //!
-//! Masks stream through with bounded memory; poses are kept whole (64 bytes each).
+//! The ground truth is the evaluated file's own, or another file's ([`evaluate_against`]): an
+//! MCAP with the same channels (the input of a `--sidecar` run, which holds only the new
+//! channels), or a TUM trajectory for the poses.
+//!
+//! Masks stream through with bounded memory (from another file on a second thread, paired by
+//! stamp); poses are kept whole (64 bytes each).
 
 use std::collections::BTreeMap;
+use std::io::Read;
 use std::path::Path;
 
 use serde::Serialize;
@@ -27,6 +33,7 @@ use crate::mcap_io::input::{McapInput, Truncation};
 use crate::mcap_io::{TOPIC_GROUNDTRUTH_MASK, TOPIC_GROUNDTRUTH_POSE};
 use crate::metrics::segmentation::{SegmentationSummary, SegmentationTally};
 use crate::metrics::trajectory::{ate, rpe_stamped, AteStats, RpeStats};
+use crate::process::{recorded_input_difference, InputDifference};
 use crate::trajectory::{interpolate, StampedPose};
 
 /// The paper's long RPE interval: 150 frames, "drift per 5 s at 30 Hz".
@@ -34,6 +41,8 @@ pub const LONG_RPE_DELTA_FRAMES: usize = 150;
 /// Masks waiting for their partner are dropped once the newest stamp is this far ahead: the
 /// two topics are written together, so partners are never further apart in a file.
 const MASK_MATCH_WINDOW_NS: u64 = 2_000_000_000;
+/// Ground-truth masks read ahead from another file (0.3 MB each at 640×480).
+const GROUNDTRUTH_MASKS_AHEAD: usize = 8;
 
 /// Segmentation scores.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -95,6 +104,95 @@ pub struct EvalReport {
     pub odometry: Option<OdometryReport>,
     /// Set when the file ends early: the scores cover its complete records only.
     pub truncation: Option<Truncation>,
+    /// Where the ground truth was read when not from the file itself.
+    pub groundtruth: Option<GroundTruthReport>,
+}
+
+/// What a ground truth from another file holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GroundTruthKind {
+    /// An MCAP file: [`TOPIC_GROUNDTRUTH_MASK`] and [`TOPIC_GROUNDTRUTH_POSE`].
+    Mcap,
+    /// A TUM trajectory (`timestamp tx ty tz qx qy qz qw`): poses only.
+    Trajectory,
+}
+
+/// The ground truth read from another file ([`evaluate_against`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GroundTruthReport {
+    /// The file.
+    pub path: String,
+    /// Its kind.
+    pub kind: GroundTruthKind,
+    /// Set when it is an MCAP file that is not the input the evaluated file was made from: the
+    /// first field of the input's identity (message count, log-time span) that the evaluated
+    /// file's `occmask.process` record holds otherwise. The scores are still computed, by stamp.
+    pub other_input: Option<InputDifference>,
+}
+
+/// Where the ground truth is read from.
+enum GroundTruth {
+    /// The evaluated file.
+    SameFile,
+    /// Another MCAP file.
+    Mcap(Box<McapInput>),
+    /// A TUM trajectory's poses.
+    Trajectory(Vec<StampedPose>),
+}
+
+impl GroundTruth {
+    /// Opens `path`: an MCAP file when it starts with the MCAP magic bytes, else a TUM
+    /// trajectory.
+    fn open(path: &Path) -> Result<Self> {
+        let mut magic = Vec::with_capacity(mcap::MAGIC.len());
+        std::fs::File::open(path)
+            .and_then(|f| f.take(mcap::MAGIC.len() as u64).read_to_end(&mut magic))
+            .map_err(|e| Error::io("cannot read", path, e))?;
+        if magic == mcap::MAGIC {
+            Ok(Self::Mcap(Box::new(McapInput::open(path)?)))
+        } else {
+            Ok(Self::Trajectory(crate::dataset::read_groundtruth(path)?))
+        }
+    }
+}
+
+/// Estimated (side 0) and ground-truth (side 1) masks paired by stamp as they stream in, and the
+/// pairs' scores.
+#[derive(Default)]
+struct MaskPairing {
+    tally: SegmentationTally,
+    matched: usize,
+    /// Masks waiting for their partner, per side, by stamp.
+    pending: [BTreeMap<u64, Mask>; 2],
+}
+
+impl MaskPairing {
+    fn add(&mut self, side: usize, stamp: u64, mask: Mask) -> Result<()> {
+        if let Some(other) = self.pending[1 - side].remove(&stamp) {
+            let (est, gt) = if side == 0 {
+                (&mask, &other)
+            } else {
+                (&other, &mask)
+            };
+            self.tally.add_masks(est, gt)?;
+            self.matched += 1;
+        } else {
+            self.pending[side].insert(stamp, mask);
+        }
+        let horizon = stamp.saturating_sub(MASK_MATCH_WINDOW_NS);
+        for p in &mut self.pending {
+            *p = p.split_off(&horizon);
+        }
+        Ok(())
+    }
+
+    fn report(self) -> SegmentationReport {
+        SegmentationReport {
+            matched_frames: self.matched,
+            scores: self.tally.summary(),
+        }
+    }
 }
 
 fn mask_from_message(input: &McapInput, channel_id: u16, data: &[u8]) -> Result<(u64, Mask)> {
@@ -237,6 +335,21 @@ fn odometry(estimated: &[StampedPose], truth: &[StampedPose]) -> Result<Odometry
 /// # Ok::<(), occmask::Error>(())
 /// ```
 pub fn evaluate(path: &Path) -> Result<EvalReport> {
+    evaluate_against(path, None)
+}
+
+/// Evaluates one output file against the ground truth in `groundtruth` (`None`: in the file
+/// itself): an MCAP file with [`TOPIC_GROUNDTRUTH_MASK`] and [`TOPIC_GROUNDTRUTH_POSE`] (the
+/// input of a `--sidecar` run, or any recording of the same stamps), or a TUM trajectory
+/// (`timestamp tx ty tz qx qy qz qw` per line, seconds and metres), whose poses are the
+/// ground truth. Masks are paired by stamp, poses interpolated to the estimated stamps, as
+/// within one file. When the MCAP is not the input the evaluated file was made from (as its
+/// `occmask.process` record says), [`GroundTruthReport::other_input`] says where they differ.
+///
+/// # Errors
+/// Those of [`evaluate`]; for the ground-truth file, I/O and MCAP errors, and
+/// [`Error::Parse`] with the line for a malformed trajectory.
+pub fn evaluate_against(path: &Path, groundtruth: Option<&Path>) -> Result<EvalReport> {
     let input = McapInput::open(path)?;
     let mask_channel = input.channel_by_topic(TOPIC_MASK).map(|c| c.id);
     let odometry_present = input.channel_by_topic(TOPIC_ODOMETRY).is_some();
@@ -247,55 +360,38 @@ pub fn evaluate(path: &Path) -> Result<EvalReport> {
             odometry_topic: TOPIC_ODOMETRY,
         });
     }
-    let gt_mask_channel = input.channel_by_topic(TOPIC_GROUNDTRUTH_MASK).map(|c| c.id);
+    let truth_source = groundtruth
+        .map(GroundTruth::open)
+        .transpose()?
+        .unwrap_or(GroundTruth::SameFile);
+    let truth_file = match &truth_source {
+        GroundTruth::SameFile => None,
+        GroundTruth::Mcap(truth) => Some(GroundTruthReport {
+            path: truth.path().display().to_string(),
+            kind: GroundTruthKind::Mcap,
+            other_input: recorded_input_difference(&input, truth)?,
+        }),
+        GroundTruth::Trajectory(_) => groundtruth.map(|p| GroundTruthReport {
+            path: p.display().to_string(),
+            kind: GroundTruthKind::Trajectory,
+            other_input: None,
+        }),
+    };
 
-    let mut estimated_masks = 0usize;
-    let mut segmentation = None;
-    if let Some(est_id) = mask_channel {
-        let mut tally = SegmentationTally::default();
-        let mut matched = 0usize;
-        let mut pending: [BTreeMap<u64, Mask>; 2] = [BTreeMap::new(), BTreeMap::new()];
-        let topics: Vec<String> = [Some(TOPIC_MASK), gt_mask_channel.map(|_| TOPIC_GROUNDTRUTH_MASK)]
-            .into_iter()
-            .flatten()
-            .map(str::to_owned)
-            .collect();
-        input.for_each_message(Some(&topics), None, |m| {
-            let id = m.header.channel_id;
-            let side = usize::from(id != est_id);
-            if side == 0 {
-                estimated_masks += 1;
-            }
-            if gt_mask_channel.is_none() {
-                return Ok(true);
-            }
-            let (stamp, mask) = mask_from_message(&input, id, &m.data)?;
-            if let Some(other) = pending[1 - side].remove(&stamp) {
-                let (est, gt) = if side == 0 {
-                    (&mask, &other)
-                } else {
-                    (&other, &mask)
-                };
-                tally.add_masks(est, gt)?;
-                matched += 1;
-            } else {
-                pending[side].insert(stamp, mask);
-            }
-            let horizon = stamp.saturating_sub(MASK_MATCH_WINDOW_NS);
-            for p in &mut pending {
-                *p = p.split_off(&horizon);
-            }
-            Ok(true)
-        })?;
-        if gt_mask_channel.is_some() {
-            segmentation = Some(SegmentationReport {
-                matched_frames: matched,
-                scores: tally.summary(),
-            });
-        }
-    }
+    let (estimated_masks, segmentation) = match mask_channel {
+        None => (0, None),
+        Some(est_id) => match &truth_source {
+            GroundTruth::SameFile => score_masks_in_file(&input, est_id)?,
+            GroundTruth::Mcap(truth) => score_masks_against(&input, est_id, truth)?,
+            GroundTruth::Trajectory(_) => (count_messages(&input, TOPIC_MASK)?, None),
+        },
+    };
 
-    let truth = read_poses(&input, TOPIC_GROUNDTRUTH_POSE)?;
+    let truth = match truth_source {
+        GroundTruth::SameFile => read_poses(&input, TOPIC_GROUNDTRUTH_POSE)?,
+        GroundTruth::Mcap(truth) => read_poses(&truth, TOPIC_GROUNDTRUTH_POSE)?,
+        GroundTruth::Trajectory(poses) => poses,
+    };
     let odometry = if truth.is_empty() || !odometry_present {
         None
     } else {
@@ -307,12 +403,108 @@ pub fn evaluate(path: &Path) -> Result<EvalReport> {
         segmentation,
         odometry,
         truncation: input.truncation().copied(),
+        groundtruth: truth_file,
+    })
+}
+
+/// Messages on `topic`.
+fn count_messages(input: &McapInput, topic: &str) -> Result<usize> {
+    let mut count = 0;
+    input.for_each_message(Some(&[topic.to_owned()]), None, |_| {
+        count += 1;
+        Ok(true)
+    })?;
+    Ok(count)
+}
+
+/// The estimated masks (channel `est_id`) counted, and scored against the file's own
+/// [`TOPIC_GROUNDTRUTH_MASK`] when it has one, in one pass.
+fn score_masks_in_file(input: &McapInput, est_id: u16) -> Result<(usize, Option<SegmentationReport>)> {
+    if input.channel_by_topic(TOPIC_GROUNDTRUTH_MASK).is_none() {
+        return Ok((count_messages(input, TOPIC_MASK)?, None));
+    }
+    let mut estimated = 0usize;
+    let mut pairing = MaskPairing::default();
+    let topics = [TOPIC_MASK.to_owned(), TOPIC_GROUNDTRUTH_MASK.to_owned()];
+    input.for_each_message(Some(&topics), None, |m| {
+        let id = m.header.channel_id;
+        let side = usize::from(id != est_id);
+        if side == 0 {
+            estimated += 1;
+        }
+        let (stamp, mask) = mask_from_message(input, id, &m.data)?;
+        pairing.add(side, stamp, mask)?;
+        Ok(true)
+    })?;
+    Ok((estimated, Some(pairing.report())))
+}
+
+/// The estimated masks (channel `est_id`) counted, and scored against `truth`'s
+/// [`TOPIC_GROUNDTRUTH_MASK`] when it has one: that file is read on a second thread, at most
+/// [`GROUNDTRUTH_MASKS_AHEAD`] masks ahead, up to the stamp of each estimated mask.
+fn score_masks_against(
+    input: &McapInput,
+    est_id: u16,
+    truth: &McapInput,
+) -> Result<(usize, Option<SegmentationReport>)> {
+    let Some(gt_id) = truth.channel_by_topic(TOPIC_GROUNDTRUTH_MASK).map(|c| c.id) else {
+        return Ok((count_messages(input, TOPIC_MASK)?, None));
+    };
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<(u64, Mask)>>(GROUNDTRUTH_MASKS_AHEAD);
+        scope.spawn(move || {
+            let read = truth.for_each_message(Some(&[TOPIC_GROUNDTRUTH_MASK.to_owned()]), None, |m| {
+                let item = mask_from_message(truth, gt_id, &m.data);
+                let failed = item.is_err();
+                // A closed channel: the estimated masks are done (or failed); stop reading.
+                Ok(tx.send(item).is_ok() && !failed)
+            });
+            if let Err(e) = read {
+                let _ = tx.send(Err(e));
+            }
+        });
+        let mut estimated = 0usize;
+        let mut pairing = MaskPairing::default();
+        // The newest ground-truth stamp read; `None` once that file is read to its end.
+        let mut truth_stamp = Some(0u64);
+        input.for_each_message(Some(&[TOPIC_MASK.to_owned()]), None, |m| {
+            let (stamp, mask) = mask_from_message(input, est_id, &m.data)?;
+            while let Some(read_to) = truth_stamp.filter(|&t| t < stamp) {
+                truth_stamp = match rx.recv() {
+                    Ok(item) => {
+                        let (gt_stamp, gt_mask) = item?;
+                        pairing.add(1, gt_stamp, gt_mask)?;
+                        Some(gt_stamp.max(read_to))
+                    }
+                    Err(_) => None,
+                };
+            }
+            estimated += 1;
+            pairing.add(0, stamp, mask)?;
+            Ok(true)
+        })?;
+        // `rx` drops here, which stops the reading thread before the scope joins it.
+        Ok((estimated, Some(pairing.report())))
     })
 }
 
 /// The report as a readable table.
 pub fn format_report(report: &EvalReport) -> String {
     let mut out = format!("{}\n", report.path);
+    // Where a missing ground truth was looked for.
+    let missing = |topic: &str| match &report.groundtruth {
+        None => format!("no {topic} in the file"),
+        Some(g) => match g.kind {
+            GroundTruthKind::Mcap => format!("no {topic} in {}", g.path),
+            GroundTruthKind::Trajectory if topic == TOPIC_GROUNDTRUTH_MASK => {
+                format!("none: {} is a trajectory (poses only)", g.path)
+            }
+            GroundTruthKind::Trajectory => format!("no poses in {}", g.path),
+        },
+    };
+    if let Some(g) = &report.groundtruth {
+        out.push_str(&format!("  ground truth           {}\n", g.path));
+    }
     out.push_str(&format!("  estimated masks        {}\n", report.estimated_masks));
     match &report.segmentation {
         Some(report) => {
@@ -337,7 +529,8 @@ pub fn format_report(report: &EvalReport) -> String {
             }
         }
         None => out.push_str(&format!(
-            "  segmentation           no {TOPIC_GROUNDTRUTH_MASK} in the file\n"
+            "  segmentation           {}\n",
+            missing(TOPIC_GROUNDTRUTH_MASK)
         )),
     }
     match &report.odometry {
@@ -347,6 +540,13 @@ pub fn format_report(report: &EvalReport) -> String {
                 o.estimated_poses, o.groundtruth_poses
             ));
             for r in &o.rpe {
+                if r.pairs == 0 {
+                    out.push_str(&format!(
+                        "    RPE Δ={:<4}                no pair of frames with ground truth at both\n",
+                        r.delta_frames
+                    ));
+                    continue;
+                }
                 out.push_str(&format!(
                     "    RPE Δ={:<4} ({:>5} pairs)  {:.4} m  {:.3}°\n",
                     r.delta_frames, r.pairs, r.translation_rmse_m, r.rotation_rmse_deg
@@ -361,7 +561,8 @@ pub fn format_report(report: &EvalReport) -> String {
             }
         }
         None => out.push_str(&format!(
-            "  odometry               no {TOPIC_GROUNDTRUTH_POSE} in the file\n"
+            "  odometry               {}\n",
+            missing(TOPIC_GROUNDTRUTH_POSE)
         )),
     }
     out

@@ -1,11 +1,12 @@
-//! `occmask eval`: F1 against `/groundtruth/mask`, RPE and ATE against `/groundtruth/pose`.
+//! `occmask eval`: F1 against `/groundtruth/mask`, RPE and ATE against `/groundtruth/pose`, of
+//! each file or of `--groundtruth FILE` (an MCAP file or a TUM trajectory).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
 
-use occmask::evaluate::{evaluate, format_report};
+use occmask::evaluate::{evaluate_against, format_report};
 
 use super::{Globals, Outcome};
 
@@ -13,22 +14,33 @@ const AFTER_HELP: &str = "\
 Examples:
   occmask eval run.occmask.mcap
   occmask eval a.occmask.mcap b.occmask.mcap --json > scores.jsonl
+  occmask eval run.sidecar.mcap --groundtruth run.mcap
+  occmask eval run.occmask.mcap --groundtruth mocap.txt
 
 F1 is computed per frame against /groundtruth/mask of the same stamp and averaged over frames
 with moving objects; RPE uses delta = 1 frame and 150 frames (or the longest the sequence
-allows), as TUM's evaluate_rpe.py; ATE after a rigid alignment.";
+allows), as TUM's evaluate_rpe.py; ATE after a rigid alignment. A `process --sidecar` output holds
+no ground truth: pass its input with --groundtruth.";
 
 /// Arguments of `occmask eval`.
 #[derive(Debug, ClapArgs)]
 #[command(after_help = AFTER_HELP)]
 pub struct EvalArgs {
-    /// Outputs of `occmask process` (annotated copies that still hold the ground truth).
+    /// Outputs of `occmask process` (annotated copies that still hold the ground truth, or
+    /// sidecars with --groundtruth).
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
 
     /// Print one JSON object per file instead of a table.
     #[arg(long)]
     pub json: bool,
+
+    /// Read the ground truth from FILE instead of from each input: an MCAP file with
+    /// /groundtruth/mask and /groundtruth/pose (the input of a `process --sidecar` run), or a
+    /// TUM trajectory of the camera (`timestamp tx ty tz qx qy qz qw` per line, seconds and
+    /// metres; poses only). Matched by stamp.
+    #[arg(long, value_name = "FILE")]
+    pub groundtruth: Option<PathBuf>,
 }
 
 /// Runs `occmask eval`.
@@ -38,7 +50,24 @@ pub struct EvalArgs {
 pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let mut outcome = Outcome::Success;
     for path in &args.inputs {
-        let report = evaluate(path).with_context(|| format!("evaluating {}", path.display()))?;
+        let report =
+            evaluate_against(path, args.groundtruth.as_deref()).with_context(|| match &args.groundtruth {
+                None => format!("evaluating {}", path.display()),
+                Some(truth) => format!("evaluating {} against {}", path.display(), truth.display()),
+            })?;
+        if let (Some(g), false) = (&report.groundtruth, globals.quiet) {
+            if let Some(d) = &g.other_input {
+                eprintln!(
+                    "warning: {} was not made from {}: the input it records has {} {}, that file \
+                     {}; scored against that file's ground truth by stamp anyway",
+                    path.display(),
+                    g.path,
+                    d.field,
+                    d.recorded,
+                    d.found
+                );
+            }
+        }
         if let Some(t) = &report.truncation {
             if !t.messages_intact {
                 // Scored, but on fewer frames than the file was written with: exit code 3.

@@ -149,6 +149,45 @@ fn last_process_record(extras: Vec<ExtraRecord>) -> Option<BTreeMap<String, Stri
         .next_back()
 }
 
+/// A field of an input's identity ([`input_identity`]) that an output's `occmask.process`
+/// record holds otherwise.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct InputDifference {
+    /// `input_messages` or `input_log_time_span_ns`.
+    pub field: String,
+    /// Its value in the output's record (`absent` when it has none).
+    pub recorded: String,
+    /// Its value for the input at hand.
+    pub found: String,
+}
+
+/// The first field of `identity` ([`input_identity`]) that `record` holds otherwise (or not at
+/// all).
+fn identity_difference(
+    record: &BTreeMap<String, String>,
+    identity: &BTreeMap<String, String>,
+) -> Option<InputDifference> {
+    identity.iter().find_map(|(key, value)| {
+        let recorded = record.get(key);
+        (recorded != Some(value)).then(|| InputDifference {
+            field: key.clone(),
+            recorded: recorded.map_or("absent", String::as_str).to_owned(),
+            found: value.clone(),
+        })
+    })
+}
+
+/// Whether `output`, an output of `occmask process`, was made from `input`: the first field of
+/// `input`'s identity ([`input_identity`]) that `output`'s `occmask.process` record holds
+/// otherwise; `None` when they agree, or when `output` has no such record.
+///
+/// # Errors
+/// [`Error::Io`], [`Error::BadMcap`] and [`Error::Mcap`] when `output`'s metadata cannot be read.
+pub fn recorded_input_difference(output: &McapInput, input: &McapInput) -> Result<Option<InputDifference>> {
+    Ok(last_process_record(output.extras()?)
+        .and_then(|record| identity_difference(&record, &input_identity(input))))
+}
+
 /// `record` against this run's input identity, choices and configuration (as JSON), in that
 /// order: the first difference.
 fn compare_record(
@@ -157,15 +196,12 @@ fn compare_record(
     choices: &RunChoices,
     configuration: &Value,
 ) -> std::result::Result<(), ExistingOutputProblem> {
-    for (key, value) in identity {
-        let found = record.get(key);
-        if found != Some(value) {
-            return Err(ExistingOutputProblem::OtherInput {
-                field: key.clone(),
-                found: found.map_or("absent", String::as_str).to_owned(),
-                expected: value.clone(),
-            });
-        }
+    if let Some(difference) = identity_difference(record, identity) {
+        return Err(ExistingOutputProblem::OtherInput {
+            field: difference.field,
+            found: difference.recorded,
+            expected: difference.found,
+        });
     }
     // Every key: one recorded but not chosen now differs too.
     for (key, expected) in choices {

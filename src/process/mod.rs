@@ -64,7 +64,7 @@ pub use config::{
     NoHooks, OdometryAnchor, ProcessConfig, ProcessHooks, DEFAULT_DEPTH_UNITS_PER_METER,
     DEFAULT_MAX_POSE_GAP_NS, DEFAULT_PAIR_TOLERANCE_NS,
 };
-pub use existing::check_existing_output;
+pub use existing::{check_existing_output, recorded_input_difference, InputDifference};
 pub use pairing::MAX_QUEUED_IMAGES;
 pub use report::{truncation_metadata, AnchorFrame, LoopTimings, ProcessReport, UnreadablePoses};
 pub use threads::{PREFETCH_BYTES, PREFETCH_MAX_MESSAGES, WRITE_QUEUE_BYTES, WRITE_QUEUE_MAX_OPS};

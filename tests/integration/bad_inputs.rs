@@ -832,6 +832,9 @@ fn eval_bad_inputs() {
     let (start, len) = *chunks.last().unwrap();
     let cut_chunk = dir.join("cut_chunk.mcap");
     std::fs::write(&cut_chunk, &bytes[..(start + len / 2) as usize]).unwrap();
+    // A ground-truth trajectory (`--groundtruth`) with a short line.
+    let bad_truth = dir.join("bad_truth.txt");
+    std::fs::write(&bad_truth, "# timestamp tx ty tz qx qy qz qw\n1.0 0 0 0 0 0 1\n").unwrap();
 
     let keep: Vec<String> = entries(dir);
     let keep: Vec<&str> = keep.iter().map(String::as_str).collect();
@@ -886,6 +889,31 @@ fn eval_bad_inputs() {
     ];
     for (name, path, expect) in cases {
         let args = os(&[&"eval", &path]);
+        check(name, &args, &inputs, dir, &keep, &expect);
+    }
+    // The ground truth from another file: a malformed trajectory, a file that is not there, and
+    // a recording that is not the evaluated file's input (chunked.mcap holds the same ground
+    // truth, but more messages than raw.mcap, from which full.mcap was made).
+    let missing = dir.join("missing.txt");
+    let groundtruth_cases: [(&str, &Path, Expect); 3] = [
+        (
+            "malformed ground-truth trajectory",
+            &bad_truth,
+            Expect::Fails(&["full.mcap", "bad_truth.txt", "line 2", "expected 8 fields"]),
+        ),
+        (
+            "missing ground-truth file",
+            &missing,
+            Expect::Fails(&["full.mcap", "missing.txt", "cannot read"]),
+        ),
+        (
+            "ground truth of another recording",
+            &chunked,
+            Expect::Warns(&["full.mcap", "was not made from", "chunked.mcap", "input_messages"]),
+        ),
+    ];
+    for (name, truth, expect) in groundtruth_cases {
+        let args = os(&[&"eval", &full, &"--groundtruth", &truth]);
         check(name, &args, &inputs, dir, &keep, &expect);
     }
     // `occmask eval … | head` with the reader already gone: ended by SIGPIPE like any filter,

@@ -152,6 +152,78 @@ fn wrong_poses_give_nonzero_errors_and_the_cli_prints_them() {
     assert!(String::from_utf8_lossy(&failed.stderr).contains("occmask process"));
 }
 
+/// A sidecar holds only the new channels, so it is scored against its input's ground truth: the
+/// annotated copy's scores, and the same odometry scores from the input's poses as a TUM
+/// trajectory. Another recording is named as such and still scored by stamp.
+#[test]
+fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
+    use occmask::evaluate::{evaluate_against, GroundTruthKind, GroundTruthReport};
+    use occmask::mcap_io::input::decode::read_poses;
+
+    let dir = tempfile::tempdir().unwrap();
+    let copy = processed(dir.path(), &ProcessConfig::default(), "copy");
+    let mut sidecar_config = ProcessConfig::default();
+    sidecar_config.annotate.copy_input = false;
+    let sidecar = processed(dir.path(), &sidecar_config, "side");
+    let input = dir.path().join("side.in.mcap");
+
+    let alone = evaluate(&sidecar).unwrap();
+    assert_eq!(alone.estimated_masks, 12);
+    assert!(
+        alone.segmentation.is_none() && alone.odometry.is_none(),
+        "{alone:?}"
+    );
+    assert!(alone.groundtruth.is_none());
+
+    let reference = evaluate(&copy).unwrap();
+    let against = evaluate_against(&sidecar, Some(&input)).unwrap();
+    assert_eq!(against.estimated_masks, 12);
+    assert_eq!(against.segmentation, reference.segmentation);
+    assert_eq!(against.segmentation.unwrap().matched_frames, 12);
+    assert!(against.segmentation.unwrap().scores.mean_f1 > 0.2, "{against:?}");
+    assert_eq!(against.odometry, reference.odometry);
+    assert!(against.odometry.as_ref().unwrap().rpe[0].translation_rmse_m > 0.9);
+    assert_eq!(
+        against.groundtruth,
+        Some(GroundTruthReport {
+            path: input.display().to_string(),
+            kind: GroundTruthKind::Mcap,
+            other_input: None,
+        })
+    );
+
+    let truth = read_poses(&McapInput::open(&input).unwrap(), GT_TOPIC).unwrap();
+    let trajectory = dir.path().join("truth.txt");
+    std::fs::write(&trajectory, occmask::trajectory::to_tum_text(&truth)).unwrap();
+    let from_text = evaluate_against(&sidecar, Some(&trajectory)).unwrap();
+    assert!(from_text.segmentation.is_none());
+    assert_eq!(from_text.groundtruth.unwrap().kind, GroundTruthKind::Trajectory);
+    let (text_odo, odo) = (from_text.odometry.unwrap(), reference.odometry.unwrap());
+    assert_eq!(text_odo.groundtruth_poses, odo.groundtruth_poses);
+    let ate = |o: &occmask::evaluate::OdometryReport| o.ate.unwrap().rmse_m;
+    assert!((ate(&text_odo) - ate(&odo)).abs() < 1e-6, "{text_odo:?} {odo:?}");
+    for (a, b) in text_odo.rpe.iter().zip(&odo.rpe) {
+        assert_eq!((a.delta_frames, a.pairs), (b.delta_frames, b.pairs));
+        assert!(
+            (a.translation_rmse_m - b.translation_rmse_m).abs() < 1e-6,
+            "{a:?} {b:?}"
+        );
+    }
+
+    // Another recording of the same stamps, 8 frames long: named, scored on its 8 frames.
+    let other = dir.path().join("other.mcap");
+    let spec = FixtureSpec {
+        frames: 8,
+        ..FixtureSpec::default()
+    };
+    std::fs::write(&other, fixture_bytes(Flavor::Protobuf, &spec)).unwrap();
+    let report = evaluate_against(&sidecar, Some(&other)).unwrap();
+    let difference = report.groundtruth.unwrap().other_input.unwrap();
+    assert_eq!(difference.field, "input_log_time_span_ns");
+    assert_ne!(difference.recorded, difference.found);
+    assert_eq!(report.segmentation.unwrap().matched_frames, 8);
+}
+
 #[test]
 fn odometry_starts_at_the_ground_truth_pose_unless_told_otherwise() {
     use occmask::mcap_io::annotate::{TOPIC_ANCHOR_PATH, TOPIC_ODOMETRY};
@@ -458,4 +530,98 @@ fn bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path() {
         closed_loop <= unmasked / 3.0,
         "closed loop {closed_loop} m, unmasked {unmasked} m"
     );
+}
+
+/// `eval --groundtruth` through the binary on the LARR excerpt, whose conversion holds masks and
+/// poses: a sidecar against the converted input scores as the annotated copy does; against
+/// another recording it warns and still scores; a malformed trajectory or a missing file is an
+/// error that names the file (and line).
+#[test]
+fn eval_reads_the_ground_truth_of_a_sidecar_from_the_file_given() {
+    use crate::common::{convert, larr_fixture, occmask, stderr, tum_fixture};
+
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.mcap");
+    let out = convert("larr", &larr_fixture(), &input, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (copy, sidecar) = (dir.path().join("copy.mcap"), dir.path().join("side.mcap"));
+    for (path, extra) in [(&copy, None), (&sidecar, Some("--sidecar"))] {
+        let mut args = vec![
+            "process".as_ref(),
+            input.as_os_str(),
+            "-o".as_ref(),
+            path.as_os_str(),
+            "-q".as_ref(),
+        ];
+        args.extend(extra.map(std::ffi::OsStr::new));
+        let out = occmask(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let eval_json = |path: &Path, truth: Option<&Path>| -> serde_json::Value {
+        let mut args = vec!["eval".as_ref(), "--json".as_ref(), path.as_os_str()];
+        if let Some(t) = truth {
+            args.extend(["--groundtruth".as_ref(), t.as_os_str()]);
+        }
+        let out = occmask(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert_eq!(stderr(&out), "");
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let reference = eval_json(&copy, None);
+    assert_eq!(reference["segmentation"]["matched_frames"], 4);
+    let against = eval_json(&sidecar, Some(&input));
+    for part in ["estimated_masks", "segmentation", "odometry"] {
+        assert_eq!(against[part], reference[part], "{part}");
+    }
+    assert_eq!(against["groundtruth"]["kind"], "mcap");
+    assert_eq!(eval_json(&sidecar, None)["odometry"], serde_json::Value::Null);
+    let table = occmask(&[
+        "eval".as_ref(),
+        sidecar.as_os_str(),
+        "--groundtruth".as_ref(),
+        larr_fixture().join("groundtruth.txt").as_os_str(),
+    ]);
+    let text = String::from_utf8(table.stdout).unwrap();
+    assert!(
+        text.contains("ground truth           ")
+            && text.contains("is a trajectory (poses only)")
+            && text.contains("ATE (4 poses)"),
+        "{text}"
+    );
+
+    let desk = dir.path().join("desk.mcap");
+    let out = convert("tum", &tum_fixture(), &desk, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = occmask(&[
+        "eval".as_ref(),
+        sidecar.as_os_str(),
+        "--groundtruth".as_ref(),
+        desk.as_os_str(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let warning = stderr(&out);
+    assert!(
+        warning.contains("was not made from") && warning.contains("input_log_time_span_ns"),
+        "{warning}"
+    );
+
+    let bad = dir.path().join("bad.txt");
+    std::fs::write(&bad, "# timestamp tx ty tz qx qy qz qw\n1.0 0 0 0 0 0 0\n").unwrap();
+    for (truth, expected) in [
+        (bad.clone(), "line 2: expected 8 fields"),
+        (dir.path().join("missing.txt"), "cannot read"),
+    ] {
+        let out = occmask(&[
+            "eval".as_ref(),
+            sidecar.as_os_str(),
+            "--groundtruth".as_ref(),
+            truth.as_os_str(),
+        ]);
+        assert_eq!(out.status.code(), Some(1));
+        let message = stderr(&out);
+        assert!(
+            message.contains(expected) && message.contains(&*truth.to_string_lossy()),
+            "{message}"
+        );
+    }
 }
