@@ -493,7 +493,7 @@ pub fn format_report(report: &EvalReport) -> String {
     let mut out = format!("{}\n", report.path);
     // Where a missing ground truth was looked for.
     let missing = |topic: &str| match &report.groundtruth {
-        None => format!("no {topic} in the file"),
+        None => format!("no {topic} in the file (--groundtruth FILE reads another)"),
         Some(g) => match g.kind {
             GroundTruthKind::Mcap => format!("no {topic} in {}", g.path),
             GroundTruthKind::Trajectory if topic == TOPIC_GROUNDTRUTH_MASK => {
