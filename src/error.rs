@@ -587,6 +587,9 @@ pub enum PoseRole {
     /// The odometry anchor.
     #[error("anchor topic")]
     Anchor,
+    /// The ground truth `eval` scores against.
+    #[error("ground-truth topic")]
+    GroundTruth,
 }
 
 /// Which message of a channel an error is about, as a player shows it ([`Error::Decode`]).

@@ -22,7 +22,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::error::{DecodeProblem, Error, ImageKind, Result};
+use crate::error::{DecodeProblem, Error, ImageKind, PoseRole, Result};
 use crate::image_buf::{ImageSize, Mask, MASK_SET};
 use crate::mcap_io::annotate::{TOPIC_MASK, TOPIC_ODOMETRY};
 use crate::mcap_io::encoding::ColorEncoding;
@@ -104,30 +104,45 @@ pub struct EvalReport {
     pub odometry: Option<OdometryReport>,
     /// Set when the file ends early: the scores cover its complete records only.
     pub truncation: Option<Truncation>,
-    /// Where the ground truth was read when not from the file itself.
-    pub groundtruth: Option<GroundTruthReport>,
+    /// Where the ground truth was read.
+    pub groundtruth: GroundTruthReport,
 }
 
-/// What a ground truth from another file holds.
+/// What the ground truth's file is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum GroundTruthKind {
-    /// An MCAP file: [`TOPIC_GROUNDTRUTH_MASK`] and [`TOPIC_GROUNDTRUTH_POSE`].
+    /// An MCAP file: [`TOPIC_GROUNDTRUTH_MASK`] and a pose channel.
     Mcap,
     /// A TUM trajectory (`timestamp tx ty tz qx qy qz qw`): poses only.
     Trajectory,
 }
 
-/// The ground truth read from another file ([`evaluate_against`]).
+/// Where `eval` reads the ground truth ([`evaluate_against`]); the default is the evaluated
+/// file's [`TOPIC_GROUNDTRUTH_MASK`] and [`TOPIC_GROUNDTRUTH_POSE`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GroundTruthSource<'a> {
+    /// Another file: an MCAP file, or a TUM trajectory (`timestamp tx ty tz qx qy qz qw` per
+    /// line, seconds and metres) whose poses are the ground truth.
+    pub file: Option<&'a Path>,
+    /// The pose channel of the MCAP file (any pose schema `process --pose-topic` reads), instead
+    /// of [`TOPIC_GROUNDTRUTH_POSE`]: named, it must be there and hold poses.
+    pub pose_topic: Option<&'a str>,
+}
+
+/// Where the ground truth was read.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct GroundTruthReport {
-    /// The file.
-    pub path: String,
+    /// The file, when not the evaluated one.
+    pub file: Option<String>,
     /// Its kind.
     pub kind: GroundTruthKind,
-    /// Set when it is an MCAP file that is not the input the evaluated file was made from: the
-    /// first field of the input's identity (message count, log-time span) that the evaluated
-    /// file's `occmask.process` record holds otherwise. The scores are still computed, by stamp.
+    /// The pose channel read (`None` for a trajectory).
+    pub pose_topic: Option<String>,
+    /// Set when the ground truth is another MCAP file that is not the input the evaluated file
+    /// was made from: the first field of the input's identity (message count, log-time span)
+    /// that the evaluated file's `occmask.process` record holds otherwise. The scores are still
+    /// computed, by stamp.
     pub other_input: Option<InputDifference>,
 }
 
@@ -335,21 +350,22 @@ fn odometry(estimated: &[StampedPose], truth: &[StampedPose]) -> Result<Odometry
 /// # Ok::<(), occmask::Error>(())
 /// ```
 pub fn evaluate(path: &Path) -> Result<EvalReport> {
-    evaluate_against(path, None)
+    evaluate_against(path, &GroundTruthSource::default())
 }
 
-/// Evaluates one output file against the ground truth in `groundtruth` (`None`: in the file
-/// itself): an MCAP file with [`TOPIC_GROUNDTRUTH_MASK`] and [`TOPIC_GROUNDTRUTH_POSE`] (the
-/// input of a `--sidecar` run, or any recording of the same stamps), or a TUM trajectory
-/// (`timestamp tx ty tz qx qy qz qw` per line, seconds and metres), whose poses are the
-/// ground truth. Masks are paired by stamp, poses interpolated to the estimated stamps, as
-/// within one file. When the MCAP is not the input the evaluated file was made from (as its
+/// Evaluates one output file against the ground truth that `source` names: the file's own, or
+/// another MCAP file's (the input of a `--sidecar` run, or any recording of the same stamps), or
+/// a TUM trajectory's poses; the poses of [`TOPIC_GROUNDTRUTH_POSE`] or of another channel.
+/// Masks are paired by stamp, poses interpolated to the estimated stamps, as within one file.
+/// When the other MCAP is not the input the evaluated file was made from (as its
 /// `occmask.process` record says), [`GroundTruthReport::other_input`] says where they differ.
 ///
 /// # Errors
 /// Those of [`evaluate`]; for the ground-truth file, I/O and MCAP errors, and
-/// [`Error::Parse`] with the line for a malformed trajectory.
-pub fn evaluate_against(path: &Path, groundtruth: Option<&Path>) -> Result<EvalReport> {
+/// [`Error::Parse`] with the line for a malformed trajectory; [`Error::NoPoses`] when a named
+/// pose topic is absent or empty; [`Error::InvalidParameter`] for a pose topic with a
+/// trajectory.
+pub fn evaluate_against(path: &Path, source: &GroundTruthSource<'_>) -> Result<EvalReport> {
     let input = McapInput::open(path)?;
     let mask_channel = input.channel_by_topic(TOPIC_MASK).map(|c| c.id);
     let odometry_present = input.channel_by_topic(TOPIC_ODOMETRY).is_some();
@@ -360,22 +376,26 @@ pub fn evaluate_against(path: &Path, groundtruth: Option<&Path>) -> Result<EvalR
             odometry_topic: TOPIC_ODOMETRY,
         });
     }
-    let truth_source = groundtruth
+    let truth_source = source
+        .file
         .map(GroundTruth::open)
         .transpose()?
         .unwrap_or(GroundTruth::SameFile);
-    let truth_file = match &truth_source {
-        GroundTruth::SameFile => None,
-        GroundTruth::Mcap(truth) => Some(GroundTruthReport {
-            path: truth.path().display().to_string(),
-            kind: GroundTruthKind::Mcap,
-            other_input: recorded_input_difference(&input, truth)?,
-        }),
-        GroundTruth::Trajectory(_) => groundtruth.map(|p| GroundTruthReport {
-            path: p.display().to_string(),
-            kind: GroundTruthKind::Trajectory,
-            other_input: None,
-        }),
+    let pose_topic = source.pose_topic.unwrap_or(TOPIC_GROUNDTRUTH_POSE);
+    let groundtruth = GroundTruthReport {
+        file: source.file.map(|f| f.display().to_string()),
+        kind: match truth_source {
+            GroundTruth::Trajectory(_) => GroundTruthKind::Trajectory,
+            _ => GroundTruthKind::Mcap,
+        },
+        pose_topic: match truth_source {
+            GroundTruth::Trajectory(_) => None,
+            _ => Some(pose_topic.to_owned()),
+        },
+        other_input: match &truth_source {
+            GroundTruth::Mcap(truth) => recorded_input_difference(&input, truth)?,
+            _ => None,
+        },
     };
 
     let (estimated_masks, segmentation) = match mask_channel {
@@ -388,9 +408,18 @@ pub fn evaluate_against(path: &Path, groundtruth: Option<&Path>) -> Result<EvalR
     };
 
     let truth = match truth_source {
-        GroundTruth::SameFile => read_poses(&input, TOPIC_GROUNDTRUTH_POSE)?,
-        GroundTruth::Mcap(truth) => read_poses(&truth, TOPIC_GROUNDTRUTH_POSE)?,
-        GroundTruth::Trajectory(poses) => poses,
+        GroundTruth::SameFile => read_truth_poses(&input, pose_topic, source.pose_topic.is_some())?,
+        GroundTruth::Mcap(truth) => read_truth_poses(&truth, pose_topic, source.pose_topic.is_some())?,
+        GroundTruth::Trajectory(poses) => match source.pose_topic {
+            None => poses,
+            Some(topic) => {
+                return Err(Error::InvalidParameter {
+                    name: "ground-truth pose topic",
+                    value: topic.to_owned(),
+                    expected: "an MCAP ground truth (a trajectory file has no topics)".into(),
+                })
+            }
+        },
     };
     let odometry = if truth.is_empty() || !odometry_present {
         None
@@ -403,8 +432,29 @@ pub fn evaluate_against(path: &Path, groundtruth: Option<&Path>) -> Result<EvalR
         segmentation,
         odometry,
         truncation: input.truncation().copied(),
-        groundtruth: truth_file,
+        groundtruth,
     })
+}
+
+/// The ground-truth poses of `topic` in `input` ([`read_poses`]); `named` (asked for by name):
+/// an absent or empty channel is an error rather than no ground truth.
+fn read_truth_poses(input: &McapInput, topic: &str, named: bool) -> Result<Vec<StampedPose>> {
+    let poses = read_poses(input, topic)?;
+    if named && poses.is_empty() {
+        let absent = input.channel_by_topic(topic).is_none();
+        return Err(Error::NoPoses {
+            path: input.path().to_owned(),
+            role: PoseRole::GroundTruth,
+            topic: topic.to_owned(),
+            child_frame: None,
+            channels: if absent {
+                input.channels().values().map(|c| c.topic.clone()).collect()
+            } else {
+                Vec::new()
+            },
+        });
+    }
+    Ok(poses)
 }
 
 /// Messages on `topic`.
@@ -491,19 +541,24 @@ fn score_masks_against(
 /// The report as a readable table.
 pub fn format_report(report: &EvalReport) -> String {
     let mut out = format!("{}\n", report.path);
+    let g = &report.groundtruth;
+    let place = g.file.as_deref().unwrap_or("the file");
     // Where a missing ground truth was looked for.
-    let missing = |topic: &str| match &report.groundtruth {
-        None => format!("no {topic} in the file (--groundtruth FILE reads another)"),
-        Some(g) => match g.kind {
-            GroundTruthKind::Mcap => format!("no {topic} in {}", g.path),
-            GroundTruthKind::Trajectory if topic == TOPIC_GROUNDTRUTH_MASK => {
-                format!("none: {} is a trajectory (poses only)", g.path)
-            }
-            GroundTruthKind::Trajectory => format!("no poses in {}", g.path),
-        },
+    let missing = |topic: Option<&str>| match (g.kind, topic) {
+        (GroundTruthKind::Mcap, Some(topic)) if g.file.is_none() => {
+            format!("no {topic} in the file (--groundtruth FILE reads another)")
+        }
+        (GroundTruthKind::Mcap, Some(topic)) => format!("no {topic} in {place}"),
+        (_, None) => format!("no poses in {place}"),
+        (GroundTruthKind::Trajectory, Some(_)) => format!("none: {place} is a trajectory (poses only)"),
     };
-    if let Some(g) = &report.groundtruth {
-        out.push_str(&format!("  ground truth           {}\n", g.path));
+    let pose_topic = g.pose_topic.as_deref().unwrap_or(TOPIC_GROUNDTRUTH_POSE);
+    if g.file.is_some() || pose_topic != TOPIC_GROUNDTRUTH_POSE {
+        out.push_str(&format!("  ground truth           {place}"));
+        if pose_topic != TOPIC_GROUNDTRUTH_POSE {
+            out.push_str(&format!(", poses of {pose_topic}"));
+        }
+        out.push('\n');
     }
     out.push_str(&format!("  estimated masks        {}\n", report.estimated_masks));
     match &report.segmentation {
@@ -530,7 +585,7 @@ pub fn format_report(report: &EvalReport) -> String {
         }
         None => out.push_str(&format!(
             "  segmentation           {}\n",
-            missing(TOPIC_GROUNDTRUTH_MASK)
+            missing(Some(TOPIC_GROUNDTRUTH_MASK))
         )),
     }
     match &report.odometry {
@@ -562,7 +617,7 @@ pub fn format_report(report: &EvalReport) -> String {
         }
         None => out.push_str(&format!(
             "  odometry               {}\n",
-            missing(TOPIC_GROUNDTRUTH_POSE)
+            missing(g.pose_topic.as_deref())
         )),
     }
     out

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args as ClapArgs;
 
-use occmask::evaluate::{evaluate_against, format_report};
+use occmask::evaluate::{evaluate_against, format_report, GroundTruthSource};
 
 use super::{Globals, Outcome};
 
@@ -16,6 +16,7 @@ Examples:
   occmask eval a.occmask.mcap b.occmask.mcap --json > scores.jsonl
   occmask eval run.sidecar.mcap --groundtruth run.mcap
   occmask eval run.occmask.mcap --groundtruth mocap.txt
+  occmask eval run.occmask.mcap --groundtruth-topic /vicon/camera/pose
 
 F1 is computed per frame against /groundtruth/mask of the same stamp and averaged over frames
 with moving objects; RPE uses delta = 1 frame and 150 frames (or the longest the sequence
@@ -41,6 +42,13 @@ pub struct EvalArgs {
     /// metres; poses only). Matched by stamp.
     #[arg(long, value_name = "FILE")]
     pub groundtruth: Option<PathBuf>,
+
+    /// The ground-truth poses are those of this channel (of each input, or of --groundtruth)
+    /// instead of /groundtruth/pose: a pose, pose-in-frame or transform channel, as `process
+    /// --pose-topic` reads (of a transform channel, the first child frame other than
+    /// camera_estimated). The poses must be the camera's.
+    #[arg(long, value_name = "TOPIC")]
+    pub groundtruth_topic: Option<String>,
 }
 
 /// Runs `occmask eval`.
@@ -50,23 +58,26 @@ pub struct EvalArgs {
 pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let mut outcome = Outcome::Success;
     for path in &args.inputs {
-        let report =
-            evaluate_against(path, args.groundtruth.as_deref()).with_context(|| match &args.groundtruth {
-                None => format!("evaluating {}", path.display()),
-                Some(truth) => format!("evaluating {} against {}", path.display(), truth.display()),
-            })?;
-        if let (Some(g), false) = (&report.groundtruth, globals.quiet) {
-            if let Some(d) = &g.other_input {
-                eprintln!(
-                    "warning: {} was not made from {}: the input it records has {} {}, that file \
-                     {}; scored against that file's ground truth by stamp anyway",
-                    path.display(),
-                    g.path,
-                    d.field,
-                    d.recorded,
-                    d.found
-                );
-            }
+        let source = GroundTruthSource {
+            file: args.groundtruth.as_deref(),
+            pose_topic: args.groundtruth_topic.as_deref(),
+        };
+        let report = evaluate_against(path, &source).with_context(|| match &args.groundtruth {
+            None => format!("evaluating {}", path.display()),
+            Some(truth) => format!("evaluating {} against {}", path.display(), truth.display()),
+        })?;
+        if let (Some(d), Some(truth), false) =
+            (&report.groundtruth.other_input, &args.groundtruth, globals.quiet)
+        {
+            eprintln!(
+                "warning: {} was not made from {}: the input it records has {} {}, that file {}; \
+                 scored against that file's ground truth by stamp anyway",
+                path.display(),
+                truth.display(),
+                d.field,
+                d.recorded,
+                d.found
+            );
         }
         if let Some(t) = &report.truncation {
             if !t.messages_intact {

@@ -36,6 +36,10 @@ pub fn flag_hint(error: &Error) -> Option<Cow<'static, str>> {
             role: PoseRole::Anchor,
             ..
         } => "check --anchor-topic, or pass --no-anchor",
+        Error::NoPoses {
+            role: PoseRole::GroundTruth,
+            ..
+        } => "check --groundtruth-topic and --groundtruth",
         Error::AnchorPoses { .. } => "pass --no-anchor to ignore the channel",
         Error::OutputExists { .. } => "pass --force to overwrite it",
         Error::ExistingOutputNotReusable { .. } => "pass --force to replace it",

@@ -916,6 +916,20 @@ fn eval_bad_inputs() {
         let args = os(&[&"eval", &full, &"--groundtruth", &truth]);
         check(name, &args, &inputs, dir, &keep, &expect);
     }
+    let args = os(&[&"eval", &full, &"--groundtruth-topic", &"/vicon/pose"]);
+    let e = Expect::Fails(&[
+        "full.mcap",
+        "ground-truth topic /vicon/pose: no poses",
+        "--groundtruth-topic",
+    ]);
+    check(
+        "ground-truth topic not in the file",
+        &args,
+        &inputs,
+        dir,
+        &keep,
+        &e,
+    );
     // `occmask eval … | head` with the reader already gone: ended by SIGPIPE like any filter,
     // no panic message. Also as --json.
     #[cfg(unix)]

@@ -157,7 +157,7 @@ fn wrong_poses_give_nonzero_errors_and_the_cli_prints_them() {
 /// trajectory. Another recording is named as such and still scored by stamp.
 #[test]
 fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
-    use occmask::evaluate::{evaluate_against, GroundTruthKind, GroundTruthReport};
+    use occmask::evaluate::{evaluate_against, GroundTruthKind, GroundTruthReport, GroundTruthSource};
     use occmask::mcap_io::input::decode::read_poses;
 
     let dir = tempfile::tempdir().unwrap();
@@ -173,10 +173,16 @@ fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
         alone.segmentation.is_none() && alone.odometry.is_none(),
         "{alone:?}"
     );
-    assert!(alone.groundtruth.is_none());
+    assert!(alone.groundtruth.file.is_none());
 
     let reference = evaluate(&copy).unwrap();
-    let against = evaluate_against(&sidecar, Some(&input)).unwrap();
+    fn from(file: &Path) -> GroundTruthSource<'_> {
+        GroundTruthSource {
+            file: Some(file),
+            pose_topic: None,
+        }
+    }
+    let against = evaluate_against(&sidecar, &from(&input)).unwrap();
     assert_eq!(against.estimated_masks, 12);
     assert_eq!(against.segmentation, reference.segmentation);
     assert_eq!(against.segmentation.unwrap().matched_frames, 12);
@@ -185,19 +191,21 @@ fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
     assert!(against.odometry.as_ref().unwrap().rpe[0].translation_rmse_m > 0.9);
     assert_eq!(
         against.groundtruth,
-        Some(GroundTruthReport {
-            path: input.display().to_string(),
+        GroundTruthReport {
+            file: Some(input.display().to_string()),
             kind: GroundTruthKind::Mcap,
+            pose_topic: Some(GT_TOPIC.to_owned()),
             other_input: None,
-        })
+        }
     );
 
     let truth = read_poses(&McapInput::open(&input).unwrap(), GT_TOPIC).unwrap();
     let trajectory = dir.path().join("truth.txt");
     std::fs::write(&trajectory, occmask::trajectory::to_tum_text(&truth)).unwrap();
-    let from_text = evaluate_against(&sidecar, Some(&trajectory)).unwrap();
+    let from_text = evaluate_against(&sidecar, &from(&trajectory)).unwrap();
     assert!(from_text.segmentation.is_none());
-    assert_eq!(from_text.groundtruth.unwrap().kind, GroundTruthKind::Trajectory);
+    assert_eq!(from_text.groundtruth.kind, GroundTruthKind::Trajectory);
+    assert_eq!(from_text.groundtruth.pose_topic, None);
     let (text_odo, odo) = (from_text.odometry.unwrap(), reference.odometry.unwrap());
     assert_eq!(text_odo.groundtruth_poses, odo.groundtruth_poses);
     let ate = |o: &occmask::evaluate::OdometryReport| o.ate.unwrap().rmse_m;
@@ -217,8 +225,8 @@ fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
         ..FixtureSpec::default()
     };
     std::fs::write(&other, fixture_bytes(Flavor::Protobuf, &spec)).unwrap();
-    let report = evaluate_against(&sidecar, Some(&other)).unwrap();
-    let difference = report.groundtruth.unwrap().other_input.unwrap();
+    let report = evaluate_against(&sidecar, &from(&other)).unwrap();
+    let difference = report.groundtruth.other_input.unwrap();
     assert_eq!(difference.field, "input_log_time_span_ns");
     assert_ne!(difference.recorded, difference.found);
     assert_eq!(report.segmentation.unwrap().matched_frames, 8);
@@ -603,6 +611,50 @@ fn eval_reads_the_ground_truth_of_a_sidecar_from_the_file_given() {
     assert!(
         warning.contains("was not made from") && warning.contains("input_log_time_span_ns"),
         "{warning}"
+    );
+
+    // The ground truth as the copy's /tf holds it (convert's camera_groundtruth beside
+    // process's camera_estimated, which is skipped): the same scores.
+    let out = occmask(&[
+        "eval".as_ref(),
+        "--json".as_ref(),
+        copy.as_os_str(),
+        "--groundtruth-topic".as_ref(),
+        "/tf".as_ref(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let from_tf: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(from_tf["odometry"]["ate"], reference["odometry"]["ate"]);
+    assert_eq!(from_tf["odometry"]["rpe"], reference["odometry"]["rpe"]);
+    assert_eq!(from_tf["groundtruth"]["pose_topic"], "/tf");
+    // A named topic that is not there, and a topic with a trajectory: errors that say so.
+    let out = occmask(&[
+        "eval".as_ref(),
+        copy.as_os_str(),
+        "--groundtruth-topic".as_ref(),
+        "/vicon/pose".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let message = stderr(&out);
+    assert!(
+        message.contains("ground-truth topic /vicon/pose: no poses")
+            && message.contains("/groundtruth/pose")
+            && message.contains("--groundtruth-topic"),
+        "{message}"
+    );
+    let out = occmask(&[
+        "eval".as_ref(),
+        copy.as_os_str(),
+        "--groundtruth".as_ref(),
+        larr_fixture().join("groundtruth.txt").as_os_str(),
+        "--groundtruth-topic".as_ref(),
+        "/tf".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("a trajectory file has no topics"),
+        "{}",
+        stderr(&out)
     );
 
     let bad = dir.path().join("bad.txt");

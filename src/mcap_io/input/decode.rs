@@ -699,7 +699,9 @@ pub fn protobuf_bytes<M: prost::Message>(msg: &M) -> Vec<u8> {
 
 /// Every pose of a pose channel (`PoseInFrame`, `PoseStamped`, transforms: each sample's
 /// `parent_from_child` as `world_from_camera`), sorted by time, one per timestamp; empty when
-/// the file has no channel `topic`.
+/// the file has no channel `topic`. Of a transform channel, the poses of one child frame: the
+/// first one in the file other than occmask's own estimated camera
+/// ([`crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED`]), as `process --pose-topic` takes them.
 ///
 /// # Errors
 /// [`Error::Decode`] when the channel's schema is not a pose schema or a message does not decode.
@@ -712,29 +714,35 @@ pub fn read_poses(input: &super::McapInput, topic: &str) -> Result<Vec<crate::tr
     };
     let topics = [topic.to_owned()];
     let read = |time_range| {
-        let mut poses = Vec::new();
+        let mut samples = Vec::new();
         input.for_each_message(Some(&topics), time_range, |m| {
-            for s in decode_poses(ct, topic, &m.data)? {
-                poses.push(crate::trajectory::StampedPose {
-                    timestamp_ns: s.timestamp_ns,
-                    world_from_camera: s.parent_from_child,
-                });
-            }
+            samples.extend(decode_poses(ct, topic, &m.data)?.into_iter().filter(|s| {
+                s.child_frame.as_deref() != Some(crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED)
+            }));
             Ok(true)
         })?;
-        Ok(poses)
+        Ok(samples)
     };
     // A pose stream is spread over the whole file: every chunk is decompressed for it. The
     // parts of the file are read side by side (on the caller's rayon pool) and joined in order.
-    let parts: Vec<Result<Vec<_>>> = input
+    let parts: Vec<Result<Vec<PoseSample>>> = input
         .log_time_parts(rayon::current_num_threads())
         .into_par_iter()
         .map(read)
         .collect();
-    let mut poses = Vec::new();
+    let mut samples = Vec::new();
     for part in parts {
-        poses.extend(part?);
+        samples.extend(part?);
     }
+    let child = samples.iter().find_map(|s| s.child_frame.clone());
+    let mut poses: Vec<_> = samples
+        .into_iter()
+        .filter(|s| s.child_frame == child)
+        .map(|s| crate::trajectory::StampedPose {
+            timestamp_ns: s.timestamp_ns,
+            world_from_camera: s.parent_from_child,
+        })
+        .collect();
     poses.sort_by_key(|p| p.timestamp_ns);
     poses.dedup_by_key(|p| p.timestamp_ns);
     Ok(poses)
