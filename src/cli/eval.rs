@@ -1,5 +1,6 @@
-//! `occmask eval`: F1 against `/groundtruth/mask`, RPE and ATE against `/groundtruth/pose`, of
-//! each file or of `--groundtruth FILE` (an MCAP file or a TUM trajectory).
+//! `occmask eval`: F1 against `/groundtruth/mask`, RPE and ATE against `/groundtruth/pose` (or
+//! `--groundtruth-topic`), of each file or of `--groundtruth FILE` (an MCAP file or a TUM
+//! trajectory).
 
 use std::path::PathBuf;
 
