@@ -832,7 +832,9 @@ fn eval_bad_inputs() {
     let (start, len) = *chunks.last().unwrap();
     let cut_chunk = dir.join("cut_chunk.mcap");
     std::fs::write(&cut_chunk, &bytes[..(start + len / 2) as usize]).unwrap();
-    // A ground-truth trajectory (`--groundtruth`) with a short line.
+    // Ground-truth trajectories (`--groundtruth`): one pose, and one with a short line.
+    let truth = dir.join("truth.txt");
+    std::fs::write(&truth, "# timestamp tx ty tz qx qy qz qw\n1.0 0 0 0 0 0 0 1\n").unwrap();
     let bad_truth = dir.join("bad_truth.txt");
     std::fs::write(&bad_truth, "# timestamp tx ty tz qx qy qz qw\n1.0 0 0 0 0 0 1\n").unwrap();
 
@@ -891,45 +893,47 @@ fn eval_bad_inputs() {
         let args = os(&[&"eval", &path]);
         check(name, &args, &inputs, dir, &keep, &expect);
     }
-    // The ground truth from another file: a malformed trajectory, a file that is not there, and
-    // a recording that is not the evaluated file's input (chunked.mcap holds the same ground
-    // truth, but more messages than raw.mcap, from which full.mcap was made).
+    // The ground truth from elsewhere: a malformed trajectory, a file that is not there, a
+    // recording that is not the evaluated file's input (chunked.mcap holds the same ground truth,
+    // but more messages than raw.mcap, from which full.mcap was made), a pose topic that is not
+    // there, and one for a trajectory.
     let missing = dir.join("missing.txt");
-    let groundtruth_cases: [(&str, &Path, Expect); 3] = [
+    let groundtruth_cases: [(&str, Vec<&dyn AsRef<std::ffi::OsStr>>, Expect); 5] = [
         (
             "malformed ground-truth trajectory",
-            &bad_truth,
+            vec![&"--groundtruth", &bad_truth],
             Expect::Fails(&["full.mcap", "bad_truth.txt", "line 2", "expected 8 fields"]),
         ),
         (
             "missing ground-truth file",
-            &missing,
+            vec![&"--groundtruth", &missing],
             Expect::Fails(&["full.mcap", "missing.txt", "cannot read"]),
         ),
         (
             "ground truth of another recording",
-            &chunked,
+            vec![&"--groundtruth", &chunked],
             Expect::Warns(&["full.mcap", "was not made from", "chunked.mcap", "input_messages"]),
         ),
+        (
+            "ground-truth topic not in the file",
+            vec![&"--groundtruth-topic", &"/vicon/pose"],
+            Expect::Fails(&[
+                "full.mcap",
+                "ground-truth topic /vicon/pose: no poses",
+                "--groundtruth-topic",
+            ]),
+        ),
+        (
+            "ground-truth topic with a trajectory",
+            vec![&"--groundtruth-topic", &"/tf", &"--groundtruth", &truth],
+            Expect::Fails(&["full.mcap", "truth.txt", "a trajectory file has no topics"]),
+        ),
     ];
-    for (name, truth, expect) in groundtruth_cases {
-        let args = os(&[&"eval", &full, &"--groundtruth", &truth]);
+    for (name, extra, expect) in groundtruth_cases {
+        let mut args = os(&[&"eval", &full]);
+        args.extend(extra.iter().map(|a| a.as_ref().to_owned()));
         check(name, &args, &inputs, dir, &keep, &expect);
     }
-    let args = os(&[&"eval", &full, &"--groundtruth-topic", &"/vicon/pose"]);
-    let e = Expect::Fails(&[
-        "full.mcap",
-        "ground-truth topic /vicon/pose: no poses",
-        "--groundtruth-topic",
-    ]);
-    check(
-        "ground-truth topic not in the file",
-        &args,
-        &inputs,
-        dir,
-        &keep,
-        &e,
-    );
     // `occmask eval … | head` with the reader already gone: ended by SIGPIPE like any filter,
     // no panic message. Also as --json.
     #[cfg(unix)]
