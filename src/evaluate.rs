@@ -98,9 +98,9 @@ pub struct EvalReport {
     pub path: String,
     /// Estimated masks in the file.
     pub estimated_masks: usize,
-    /// Segmentation, when `/groundtruth/mask` is present.
+    /// Segmentation, when the ground truth has `/groundtruth/mask`.
     pub segmentation: Option<SegmentationReport>,
-    /// Odometry, when `/groundtruth/pose` is present.
+    /// Odometry, when the ground truth has poses ([`GroundTruthReport::pose_topic`]).
     pub odometry: Option<OdometryReport>,
     /// Set when the file ends early: the scores cover its complete records only.
     pub truncation: Option<Truncation>,
