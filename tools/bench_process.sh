@@ -8,7 +8,8 @@
 #           prints one table: best wall of REPEATS runs (default 3), total frames/s, speed-up
 #           over one file, CPU (user+sys) per frame, peak RSS.
 #  memory   peak RSS on a generated file of at least MIN_BYTES (default 2 GiB), annotated copy and
-#           --sidecar, plus the TUM folder's file and its eval.
+#           --sidecar, whole and its first second (--end 1), plus the TUM folder's file and its
+#           eval.
 #
 # Usage: bash tools/bench_process.sh [scaling|memory|all] [MIN_BYTES]   (default: all)
 #        REPEATS=5 SCALING_MB=480 bash tools/bench_process.sh scaling
@@ -126,8 +127,12 @@ memory() {
   echo "== big file, sidecar"
   $TIME -f "wall %e s, peak RSS %M KB" $BIN process "$OUT/big.mcap" -o "$OUT/big.sidecar.mcap" --sidecar --force -q
   ls -l "$OUT/big.sidecar.mcap"
+  echo "== big file, annotated copy of its first second (--end 1: the rest is copied, not decoded)"
+  $TIME -f "wall %e s, peak RSS %M KB" $BIN process "$OUT/big.mcap" -o "$OUT/big.end.mcap" --end 1 --force -q
+  echo "== big file, sidecar of its first second"
+  $TIME -f "wall %e s, peak RSS %M KB" $BIN process "$OUT/big.mcap" -o "$OUT/big.end.mcap" --end 1 --sidecar --force -q
   if [ "${KEEP:-0}" != 1 ]; then
-    rm -f "$OUT/big.mcap" "$OUT/big.out.mcap" "$OUT/big.sidecar.mcap"
+    rm -f "$OUT/big.mcap" "$OUT/big.out.mcap" "$OUT/big.sidecar.mcap" "$OUT/big.end.mcap"
   fi
 }
 

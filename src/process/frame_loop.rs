@@ -24,7 +24,7 @@ use super::adapter::{FrameProcessor, ProcessorFactory};
 #[cfg(doc)]
 use super::config::OdometryAnchor;
 use super::config::{ProcessConfig, ProcessHooks};
-use super::pairing::{Pairer, Pairing, Pixels, Queued};
+use super::pairing::{Pairer, Pairing, Pixels, Queued, TimeRange};
 use super::poses::{anchor_at, AnchorStream, FramePose, InputPoses, MAX_UNANCHORED_FRAMES};
 use super::rectify::Publisher;
 use super::report::{AnchorFrame, ProcessReport};
@@ -69,6 +69,11 @@ pub(super) struct FrameLoop {
     /// first processed frame ([`OdometryAnchor`]).
     pub(super) world_from_odometry: Option<Isometry3<f64>>,
     pub(super) first_color_ns: Option<u64>,
+    /// No frame is processed any more (a frame past `--end` was reached, or the input ended):
+    /// the processor has been finished.
+    pub(super) processing_done: bool,
+    /// [`WriteOp::EndPaths`] is sent: the last frame is written.
+    pub(super) paths_ended: bool,
     pub(super) report: ProcessReport,
     /// Returns processed image buffers to the prefetch thread.
     pub(super) recycle: (Sender<GrayF32>, Sender<DepthMeters>),
@@ -123,30 +128,19 @@ impl FrameLoop {
             self.frame(ctx, output, make_processor, hooks, color, depth)?;
         }
         if end_of_stream {
-            if let Some(mut processor) = self.processor.take() {
-                let pipeline_start = Instant::now();
-                let mut writing_s = 0.0;
-                // Each result is written as it becomes final, so the writer thread compresses
-                // while the processor finishes the later frames.
-                let finished = processor.finish(&mut |result| {
-                    let write_start = Instant::now();
-                    let written = self.write_result(ctx, output, hooks, result);
-                    writing_s += write_start.elapsed().as_secs_f64();
-                    written
-                });
-                self.report.timings.pipeline_s += pipeline_start.elapsed().as_secs_f64() - writing_s;
-                self.report.colour_registration = processor.colour_registration();
-                self.processor = Some(processor);
-                finished?;
-            }
+            self.finish_processing(ctx, output, hooks)?;
+        }
+        // Every frame's result is in once processing is done and none waits for the anchor
+        // channel: the held ones will not be anchored by a later frame, and the paths end here,
+        // before the input messages logged after the last frame, which are copied below.
+        if self.processing_done && self.waiting.is_empty() && !self.paths_ended {
             if !self.unanchored.is_empty() {
                 self.give_up_anchor(ctx);
                 self.flush_unanchored(ctx, output, hooks)?;
             }
-            // Before the input messages logged after the last frame, which are copied below.
             output.send(WriteOp::EndPaths)?;
+            self.paths_ended = true;
         }
-        // New messages are still to come for frames being paired or processed: input messages
         // after the oldest of them wait.
         let limit = if end_of_stream {
             u64::MAX
@@ -177,6 +171,34 @@ impl FrameLoop {
         Ok(())
     }
 
+    /// Finishes the processor, once: the results of the frames it holds are written as they
+    /// become final, so the writer thread compresses while it finishes the later frames.
+    fn finish_processing(
+        &mut self,
+        ctx: &FrameContext<'_>,
+        output: &OutputQueue,
+        hooks: &mut dyn ProcessHooks,
+    ) -> Result<()> {
+        if std::mem::replace(&mut self.processing_done, true) {
+            return Ok(());
+        }
+        let Some(mut processor) = self.processor.take() else {
+            return Ok(());
+        };
+        let pipeline_start = Instant::now();
+        let mut writing_s = 0.0;
+        let finished = processor.finish(&mut |result| {
+            let write_start = Instant::now();
+            let written = self.write_result(ctx, output, hooks, result);
+            writing_s += write_start.elapsed().as_secs_f64();
+            written
+        });
+        self.report.timings.pipeline_s += pipeline_start.elapsed().as_secs_f64() - writing_s;
+        self.report.colour_registration = processor.colour_registration();
+        self.processor = Some(processor);
+        finished
+    }
+
     fn frame(
         &mut self,
         ctx: &FrameContext<'_>,
@@ -187,11 +209,16 @@ impl FrameLoop {
         depth: Queued,
     ) -> Result<()> {
         let stamp = color.timestamp_ns;
-        let offset = stamp.saturating_sub(self.first_color_ns.unwrap_or(stamp));
-        let before_start = ctx.config.start_offset_ns.is_some_and(|s| offset < s);
-        let after_end = ctx.config.end_offset_ns.is_some_and(|e| offset >= e);
-        if before_start || after_end {
+        let range = TimeRange::of(ctx.config);
+        let first_color_ns = self.first_color_ns.unwrap_or(stamp);
+        if self.processing_done || !range.keeps(stamp, first_color_ns) {
             self.report.outside_time_range += 1;
+            if range.is_past_end(stamp, first_color_ns) {
+                // The range ends at the first frame past it: the frames the processor holds
+                // are finished now, so the input read after them is not held in memory until
+                // the end of the file.
+                self.finish_processing(ctx, output, hooks)?;
+            }
             return Ok(());
         }
         if self.report.last_timestamp_ns.is_some_and(|last| stamp <= last) {
@@ -209,11 +236,15 @@ impl FrameLoop {
         let decode_ms = color.decode_ms + depth.decode_ms;
         let rectify_s = color.rectify_s + depth.rectify_s;
         let point_colors = color.point_colors;
-        if let (Pixels::Gray(gray), Pixels::Depth(depth_m)) = (color.pixels, depth.pixels) {
-            // The receiver is gone once the prefetch thread has finished: nothing to recycle.
-            let _ = self.recycle.0.send(std::mem::replace(&mut self.gray, gray));
-            let _ = self.recycle.1.send(std::mem::replace(&mut self.depth_m, depth_m));
-        }
+        let (Pixels::Gray(gray), Pixels::Depth(depth_m)) = (color.pixels, depth.pixels) else {
+            // The prefetch thread left an image of the pair undecoded: by the same range, with
+            // the pairing tolerance, so this does not happen; were it to, the frame is outside.
+            self.report.outside_time_range += 1;
+            return Ok(());
+        };
+        // The receiver is gone once the prefetch thread has finished: nothing to recycle.
+        let _ = self.recycle.0.send(std::mem::replace(&mut self.gray, gray));
+        let _ = self.recycle.1.send(std::mem::replace(&mut self.depth_m, depth_m));
         // The prefetch thread checked both sizes against the first images and rectified depth
         // into the colour camera.
         let size = self.gray.size();

@@ -70,7 +70,7 @@ pub use report::{truncation_metadata, AnchorFrame, LoopTimings, ProcessReport, U
 pub use threads::{PREFETCH_BYTES, PREFETCH_MAX_MESSAGES, WRITE_QUEUE_BYTES, WRITE_QUEUE_MAX_OPS};
 
 use frame_loop::{FrameContext, FrameLoop};
-use pairing::Pairer;
+use pairing::{Pairer, TimeRange};
 use poses::{topic_overrides, AnchorStream, InputPoses};
 use queue::byte_queue;
 use rectify::{plan_geometry, Rectifier};
@@ -243,6 +243,8 @@ pub fn process_file<W: Write + Seek + Send>(
         processor: None,
         world_from_odometry: None,
         first_color_ns: None,
+        processing_done: false,
+        paths_ended: false,
         report: ProcessReport {
             topics: topics.clone(),
             intrinsics: geometry.pipeline.intrinsics,
@@ -286,6 +288,7 @@ pub fn process_file<W: Write + Seek + Send>(
         depth_units_per_meter,
         timings: config.timings,
         point_grid: point_grid.as_ref(),
+        range: TimeRange::of(config),
     };
     let loop_start = Instant::now();
     let mut output_wait = std::time::Duration::ZERO;
@@ -303,9 +306,10 @@ pub fn process_file<W: Write + Seek + Send>(
         let mut rectifier = rectifier;
         scope.spawn(move || {
             let mut rgb = Rgb8::filled(ImageSize::new(0, 0), [0; 3]);
+            let mut first_color_ns = None;
             let result = input.for_each_message(read_topics, None, |message| {
                 let item = decoder
-                    .decode(&message, &pool_rx, &mut rectifier, &mut rgb)
+                    .decode(&message, &pool_rx, &mut rectifier, &mut rgb, &mut first_color_ns)
                     .map(|image| Prefetched { message, image });
                 let bytes = item.as_ref().map_or(0, Prefetched::bytes);
                 let failed = item.is_err();

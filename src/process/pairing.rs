@@ -18,6 +18,66 @@ pub const MAX_QUEUED_IMAGES: usize = 64;
 pub(super) enum Pixels {
     Gray(GrayF32),
     Depth(DepthMeters),
+    /// Not decoded: the image lies outside the time range, so no frame that is processed can
+    /// use it ([`TimeRange::may_use`]); it is still paired and counted.
+    Skipped,
+}
+
+/// The frames `process` keeps (`--start`, `--end`): colour stamps in
+/// `[first + start, first + end)`, `first` being the first colour image's stamp.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct TimeRange {
+    pub(super) start_offset_ns: Option<u64>,
+    pub(super) end_offset_ns: Option<u64>,
+    /// Colour and depth pair within this; a depth image this close to the range may be used.
+    pub(super) pair_tolerance_ns: u64,
+}
+
+impl TimeRange {
+    /// The range `config` asks for.
+    pub(super) fn of(config: &super::ProcessConfig) -> Self {
+        Self {
+            start_offset_ns: config.start_offset_ns,
+            end_offset_ns: config.end_offset_ns,
+            pair_tolerance_ns: config.pair_tolerance_ns,
+        }
+    }
+
+    /// Whether a frame whose colour image is stamped `stamp_ns` is processed.
+    pub(super) fn keeps(&self, stamp_ns: u64, first_color_ns: u64) -> bool {
+        let offset = stamp_ns.saturating_sub(first_color_ns);
+        !(self.start_offset_ns.is_some_and(|s| offset < s) || self.is_past_end(stamp_ns, first_color_ns))
+    }
+
+    /// Whether a colour image stamped `stamp_ns` is at or past the end of the range.
+    pub(super) fn is_past_end(&self, stamp_ns: u64, first_color_ns: u64) -> bool {
+        self.end_offset_ns
+            .is_some_and(|e| stamp_ns.saturating_sub(first_color_ns) >= e)
+    }
+
+    /// Whether an image stamped `stamp_ns` may be part of a processed frame: a colour image
+    /// that [`Self::keeps`]; a depth image within the pairing tolerance of one that it keeps; any
+    /// image while the first colour stamp is unknown.
+    pub(super) fn may_use(&self, is_color: bool, stamp_ns: u64, first_color_ns: Option<u64>) -> bool {
+        let Some(first) = first_color_ns else {
+            return true;
+        };
+        if is_color {
+            return self.keeps(stamp_ns, first);
+        }
+        let earliest = stamp_ns.saturating_sub(self.pair_tolerance_ns);
+        let latest = stamp_ns.saturating_add(self.pair_tolerance_ns);
+        // Kept colour stamps form one interval: a depth image may be used when the stamps its
+        // partner can have meet it.
+        // (With a start of 0 a colour image stamped before the first one is kept too.)
+        let before_start = self
+            .start_offset_ns
+            .is_some_and(|s| s > 0 && latest < first.saturating_add(s));
+        let after_end = self
+            .end_offset_ns
+            .is_some_and(|e| earliest.saturating_sub(first) >= e && earliest >= first);
+        !(before_start || after_end)
+    }
 }
 
 #[cfg(doc)]
@@ -104,5 +164,59 @@ impl Pairer {
     /// Log time of the oldest colour image still waiting (new messages will be written then).
     pub(super) fn oldest_color_log_time(&self) -> Option<u64> {
         self.color.iter().map(|q| q.log_time_ns).min()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+    const FIRST: u64 = 1_000 * MS;
+
+    fn range(start_ms: Option<u64>, end_ms: Option<u64>) -> TimeRange {
+        TimeRange {
+            start_offset_ns: start_ms.map(|s| s * MS),
+            end_offset_ns: end_ms.map(|e| e * MS),
+            pair_tolerance_ns: 20 * MS,
+        }
+    }
+
+    #[test]
+    fn colour_images_are_kept_from_the_start_up_to_the_end() {
+        let r = range(Some(100), Some(200));
+        let kept: Vec<u64> = (0..30)
+            .map(|k| k * 10)
+            .filter(|&ms| r.keeps(FIRST + ms * MS, FIRST))
+            .collect();
+        assert_eq!(kept, (10..20).map(|k| k * 10).collect::<Vec<_>>());
+        assert!(!r.is_past_end(FIRST + 199 * MS, FIRST) && r.is_past_end(FIRST + 200 * MS, FIRST));
+        for (is_color, ms) in [(true, 100), (true, 199), (false, 100)] {
+            assert!(
+                r.may_use(is_color, FIRST + ms * MS, Some(FIRST)),
+                "{is_color} {ms}"
+            );
+        }
+        assert!(!r.may_use(true, FIRST + 200 * MS, Some(FIRST)));
+        assert!(range(None, None).keeps(FIRST + 99_000 * MS, FIRST));
+    }
+
+    #[test]
+    fn a_depth_image_is_used_when_a_kept_colour_image_can_pair_with_it() {
+        let r = range(Some(100), Some(200));
+        // Within the tolerance (20 ms) of the kept stamps [100, 200) ms.
+        for ms in [80, 100, 199, 219] {
+            assert!(r.may_use(false, FIRST + ms * MS, Some(FIRST)), "{ms} ms");
+        }
+        for ms in [0, 79, 220, 5_000] {
+            assert!(!r.may_use(false, FIRST + ms * MS, Some(FIRST)), "{ms} ms");
+        }
+        // Before the first colour image is known, every image is decoded.
+        assert!(r.may_use(false, 0, None) && r.may_use(true, 0, None));
+        // A start of 0 keeps colour stamped before the first one (offset 0): no depth before it
+        // is skipped for being early.
+        assert!(range(Some(0), None).may_use(false, FIRST - 500 * MS, Some(FIRST)));
+        // Stamps near 0 do not wrap.
+        assert!(range(None, Some(200)).may_use(false, 5 * MS, Some(10 * MS)));
     }
 }

@@ -16,7 +16,7 @@ use crate::mcap_io::DEPTH_UNITS_KEY;
 use crate::point_cloud::PointGrid;
 
 use super::config::DEFAULT_DEPTH_UNITS_PER_METER;
-use super::pairing::{Pixels, Queued};
+use super::pairing::{Pixels, Queued, TimeRange};
 #[cfg(doc)]
 use super::rectify::plan_geometry;
 use super::rectify::{Rectifier, StreamInfo};
@@ -144,12 +144,16 @@ pub(super) struct ImageDecoder<'a> {
     pub(super) timings: bool,
     /// `--points`: colour images are also sampled at the grid's points.
     pub(super) point_grid: Option<&'a PointGrid>,
+    /// The frames processed: images that no such frame can use are not decoded.
+    pub(super) range: TimeRange,
 }
 
 impl ImageDecoder<'_> {
     /// The decoded image when `m` is on the colour (`true`) or depth topic; `None` for other
     /// topics. Buffers come from `pool` when the frame loop has returned some; `rgb` is the
-    /// scratch of `--points`' colour decode.
+    /// scratch of `--points`' colour decode. `first_color_ns`: the stamp of the first colour
+    /// image so far (set here from the first one); an image outside [`Self::range`] is only
+    /// parsed for its stamp ([`Pixels::Skipped`]).
     ///
     /// # Errors
     /// Undecodable images (naming the message), size changes, rectification errors.
@@ -159,6 +163,7 @@ impl ImageDecoder<'_> {
         pool: &BufferPool,
         rectifier: &mut Rectifier,
         rgb: &mut Rgb8,
+        first_color_ns: &mut Option<u64>,
     ) -> Result<Option<(bool, Queued)>> {
         let topics = self.topics;
         let id = m.header.channel_id;
@@ -173,6 +178,12 @@ impl ImageDecoder<'_> {
             (self.depth_ct, &topics.depth.topic)
         };
         let decoded = decode_image(ct, topic, &m.data).and_then(|msg| {
+            if is_color {
+                first_color_ns.get_or_insert(msg.timestamp_ns);
+            }
+            if !self.range.may_use(is_color, msg.timestamp_ns, *first_color_ns) {
+                return Ok((msg, Pixels::Skipped, 0.0, None));
+            }
             // Decoded, then undistorted and registered for the pipeline.
             let mut point_colors = None;
             let (pixels, rectify_s) = if is_color {

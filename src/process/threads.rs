@@ -70,7 +70,14 @@ impl Prefetched {
                     ..
                 },
             )) => std::mem::size_of_val(d.as_slice()),
-            None => 0,
+            Some((
+                _,
+                Queued {
+                    pixels: Pixels::Skipped,
+                    ..
+                },
+            ))
+            | None => 0,
         };
         let colors = match &self.image {
             Some((_, q)) => q

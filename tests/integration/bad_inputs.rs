@@ -1341,3 +1341,78 @@ fn occmask_in(args: &[OsString], cwd: &Path) -> Output {
         .output()
         .unwrap()
 }
+
+/// `--start`/`--end`: images outside the range are not decoded, so broken ones there (the
+/// colour of the second and of the last frame; the first image of each stream is decoded for
+/// its size whatever the range) do not stop the run, while the depth image just
+/// past the end that pairs with the last colour image inside it is decoded; the passes finish
+/// at the first frame past the end, and the paths end there, before the input logged after it
+/// rather than at the end of the file (offline and causal).
+#[test]
+fn images_outside_the_time_range_are_not_decoded_and_the_paths_end_at_its_last_frame() {
+    use process_support::COLOR_TOPIC;
+    // Ten frames: three past the end.
+    let spec = FixtureSpec { frames: 10, ..spec() };
+    let bytes = rewrite(&fixture_bytes(Flavor::Protobuf, &spec), |topic, _, data| {
+        if topic != COLOR_TOPIC {
+            return Some(data);
+        }
+        let mut img = fm::RawImage::decode(data.as_slice()).unwrap();
+        let frame = frame_of(occmask::mcap_io::codec::timestamp_ns(img.timestamp.as_ref()));
+        if frame == 1 || frame == 9 {
+            img.data.truncate(10);
+        }
+        Some(img.encode_to_vec())
+    });
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in.mcap");
+    std::fs::write(&input, &bytes).unwrap();
+    // Kept: colour offsets in [50 ms, 6 frames + 1 ms), frames 2 to 6; frame 6's depth, 3 ms
+    // after its colour, lies past the end.
+    let end_s = format!("{}", (6 * FRAME_NS + 1_000_000) as f64 / 1e9);
+    for mode in [None, Some("--causal")] {
+        let output = tmp.path().join("out.mcap");
+        let mut args = os(&[
+            &"process", &input, &"-o", &output, &"--start", &"0.05", &"--end", &end_s, &"-f",
+        ]);
+        args.extend(mode.map(OsString::from));
+        let out = occmask(&args);
+        assert_eq!(out.status.code(), Some(0), "{mode:?}: {}", stderr(&out));
+        let summary = stderr(&out);
+        let row = summary
+            .lines()
+            .find(|l| l.starts_with("in.mcap"))
+            .unwrap_or_default();
+        assert_eq!(row.split_whitespace().nth(1), Some("5"), "{mode:?}: {summary}");
+
+        let written = std::fs::read(&output).unwrap();
+        let messages: Vec<(String, u64)> = mcap::MessageStream::new(&written)
+            .unwrap()
+            .map(|m| {
+                let m = m.unwrap();
+                (m.channel.topic.clone(), m.log_time)
+            })
+            .collect();
+        assert!(
+            messages.windows(2).all(|w| w[0].1 <= w[1].1),
+            "{mode:?}: out of log-time order"
+        );
+        let masks: Vec<u64> = messages
+            .iter()
+            .filter(|(t, _)| t == "/occmask/mask")
+            .map(|(_, log_time)| *log_time)
+            .collect();
+        assert_eq!(masks.len(), 5, "{mode:?}");
+        let (path_at, (_, path_log_time)) = messages
+            .iter()
+            .enumerate()
+            .rfind(|(_, (t, _))| t == "/occmask/path")
+            .unwrap();
+        // Logged at the latest log time written (the last frame's, or a message copied since).
+        assert!(Some(path_log_time) >= masks.last(), "{mode:?}: the last path");
+        assert!(
+            messages[path_at + 1..].iter().any(|(t, _)| t == COLOR_TOPIC),
+            "{mode:?}: the input after the last frame comes after the paths"
+        );
+    }
+}
