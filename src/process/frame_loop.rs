@@ -131,9 +131,10 @@ impl FrameLoop {
             self.finish_processing(ctx, output, hooks)?;
         }
         // Every frame's result is in once processing is done and none waits for the anchor
-        // channel: the held ones will not be anchored by a later frame, and the paths end here,
-        // before the input messages logged after the last frame, which are copied below.
-        if self.processing_done && self.waiting.is_empty() && !self.paths_ended {
+        // channel (at the end of the input none does): the held ones will not be anchored by a
+        // later frame, and the paths end here, before the input messages logged after the last
+        // frame, which are copied below.
+        if self.processing_done && (end_of_stream || self.waiting.is_empty()) && !self.paths_ended {
             if !self.unanchored.is_empty() {
                 self.give_up_anchor(ctx);
                 self.flush_unanchored(ctx, output, hooks)?;
@@ -141,6 +142,7 @@ impl FrameLoop {
             output.send(WriteOp::EndPaths)?;
             self.paths_ended = true;
         }
+        // New messages are still to come for frames being paired or processed: input messages
         // after the oldest of them wait.
         let limit = if end_of_stream {
             u64::MAX
