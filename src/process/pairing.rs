@@ -68,14 +68,14 @@ impl TimeRange {
         let earliest = stamp_ns.saturating_sub(self.pair_tolerance_ns);
         let latest = stamp_ns.saturating_add(self.pair_tolerance_ns);
         // Kept colour stamps form one interval: a depth image may be used when the stamps its
-        // partner can have meet it.
-        // (With a start of 0 a colour image stamped before the first one is kept too.)
+        // partner can have meet it. (With a start of 0, colour stamped before the first colour
+        // image is kept too, at offset 0.)
         let before_start = self
             .start_offset_ns
             .is_some_and(|s| s > 0 && latest < first.saturating_add(s));
         let after_end = self
             .end_offset_ns
-            .is_some_and(|e| earliest.saturating_sub(first) >= e && earliest >= first);
+            .is_some_and(|e| earliest >= first && earliest - first >= e);
         !(before_start || after_end)
     }
 }
