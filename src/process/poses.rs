@@ -109,15 +109,8 @@ impl InputPoses {
             return Ok(());
         };
         for sample in samples? {
-            if let Some(c) = &sample.child_frame {
-                if c == crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED {
-                    continue;
-                }
-                match &e.child {
-                    None => e.child = Some(c.clone()),
-                    Some(wanted) if wanted != c => continue,
-                    Some(_) => {}
-                }
+            if !sample.follows(&mut e.child) {
+                continue;
             }
             e.channel.samples.insert(&sample);
         }

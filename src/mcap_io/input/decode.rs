@@ -251,6 +251,22 @@ pub struct PoseSample {
     pub parent_from_child: Isometry3<f64>,
 }
 
+impl PoseSample {
+    /// Whether the sample is of the child frame a pose stream follows: `child`, or when that is
+    /// `None` the first child frame seen (which it becomes); never occmask's own estimated
+    /// camera ([`crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED`]). A pose without a child
+    /// frame (`PoseInFrame`, `PoseStamped`) always is.
+    pub fn follows(&self, child: &mut Option<String>) -> bool {
+        let Some(c) = &self.child_frame else {
+            return true;
+        };
+        if c == crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED {
+            return false;
+        }
+        child.get_or_insert_with(|| c.clone()) == c
+    }
+}
+
 /// [`Error::Decode`] for `topic`: `expected` and `found` as a [`DecodeProblem::Value`].
 pub(crate) fn bad_value(topic: &str, expected: impl Into<String>, found: impl Into<String>) -> Error {
     Error::decode(topic, DecodeProblem::Value(Mismatch::new(expected, found)))
@@ -699,9 +715,8 @@ pub fn protobuf_bytes<M: prost::Message>(msg: &M) -> Vec<u8> {
 
 /// Every pose of a pose channel (`PoseInFrame`, `PoseStamped`, transforms: each sample's
 /// `parent_from_child` as `world_from_camera`), sorted by time, one per timestamp; empty when
-/// the file has no channel `topic`. Of a transform channel, the poses of one child frame: the
-/// first one in the file other than occmask's own estimated camera
-/// ([`crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED`]), as `process --pose-topic` takes them.
+/// the file has no channel `topic`. Of a transform channel, the poses of one child frame
+/// ([`PoseSample::follows`]), as `process --pose-topic` takes them.
 ///
 /// # Errors
 /// [`Error::Decode`] when the channel's schema is not a pose schema or a message does not decode.
@@ -716,9 +731,7 @@ pub fn read_poses(input: &super::McapInput, topic: &str) -> Result<Vec<crate::tr
     let read = |time_range| {
         let mut samples = Vec::new();
         input.for_each_message(Some(&topics), time_range, |m| {
-            samples.extend(decode_poses(ct, topic, &m.data)?.into_iter().filter(|s| {
-                s.child_frame.as_deref() != Some(crate::mcap_io::annotate::FRAME_CAMERA_ESTIMATED)
-            }));
+            samples.extend(decode_poses(ct, topic, &m.data)?);
             Ok(true)
         })?;
         Ok(samples)
@@ -734,10 +747,10 @@ pub fn read_poses(input: &super::McapInput, topic: &str) -> Result<Vec<crate::tr
     for part in parts {
         samples.extend(part?);
     }
-    let child = samples.iter().find_map(|s| s.child_frame.clone());
+    let mut child = None;
     let mut poses: Vec<_> = samples
         .into_iter()
-        .filter(|s| s.child_frame == child)
+        .filter(|s| s.follows(&mut child))
         .map(|s| crate::trajectory::StampedPose {
             timestamp_ns: s.timestamp_ns,
             world_from_camera: s.parent_from_child,
