@@ -58,11 +58,11 @@ pub struct EvalArgs {
 /// The first file that cannot be read or has no occmask channels.
 pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let mut outcome = Outcome::Success;
+    let source = GroundTruthSource {
+        file: args.groundtruth.as_deref(),
+        pose_topic: args.groundtruth_topic.as_deref(),
+    };
     for path in &args.inputs {
-        let source = GroundTruthSource {
-            file: args.groundtruth.as_deref(),
-            pose_topic: args.groundtruth_topic.as_deref(),
-        };
         let report = evaluate_against(path, &source).with_context(|| match &args.groundtruth {
             None => format!("evaluating {}", path.display()),
             Some(truth) => format!("evaluating {} against {}", path.display(), truth.display()),

@@ -38,6 +38,8 @@ pub(super) struct FrameContext<'a> {
     pub(super) calibration_size: Option<ImageSize>,
     /// The samples of `--points`.
     pub(super) point_grid: Option<&'a PointGrid>,
+    /// The frames processed (`--start`, `--end`).
+    pub(super) range: TimeRange,
 }
 
 /// The frame loop's state.
@@ -211,11 +213,10 @@ impl FrameLoop {
         depth: Queued,
     ) -> Result<()> {
         let stamp = color.timestamp_ns;
-        let range = TimeRange::of(ctx.config);
         let first_color_ns = self.first_color_ns.unwrap_or(stamp);
-        if self.processing_done || !range.keeps(stamp, first_color_ns) {
+        if self.processing_done || !ctx.range.keeps(stamp, first_color_ns) {
             self.report.outside_time_range += 1;
-            if range.is_past_end(stamp, first_color_ns) {
+            if ctx.range.is_past_end(stamp, first_color_ns) {
                 // The range ends at the first frame past it: the frames the processor holds
                 // are finished now, so the input read after them is not held in memory until
                 // the end of the file.

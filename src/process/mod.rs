@@ -278,6 +278,7 @@ pub fn process_file<W: Write + Seek + Send>(
         intrinsics: geometry.pipeline.intrinsics,
         calibration_size,
         point_grid: point_grid.as_ref(),
+        range: TimeRange::of(config),
     };
     // A prefetch thread reads and decodes (PNG/JPEG, depth scaling) while this thread runs the
     // pipeline and writes: decoding then overlaps with processing.
@@ -288,7 +289,7 @@ pub fn process_file<W: Write + Seek + Send>(
         depth_units_per_meter,
         timings: config.timings,
         point_grid: point_grid.as_ref(),
-        range: TimeRange::of(config),
+        range: ctx.range,
     };
     let loop_start = Instant::now();
     let mut output_wait = std::time::Duration::ZERO;
