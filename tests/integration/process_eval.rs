@@ -492,7 +492,7 @@ fn external_poses_are_read_with_the_images_and_frames_wait_for_late_samples() {
 /// targets: at most 0.08 m, and at most a third of unmasked DVO's.
 #[test]
 fn bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path() {
-    use crate::common::{convert, occmask, real_data, stderr};
+    use crate::common::{convert, occmask, process, real_data, stderr};
     let Some(src) = real_data(
         "bonn_crowd_200",
         "process_eval::bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path",
@@ -506,15 +506,7 @@ fn bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path() {
     // ATE and the frame-to-frame rotation error (RPE over 1 frame, degrees) of one run.
     let scores = |name: &str, pose_args: &[&str]| -> (f64, f64) {
         let output = dir.path().join(name);
-        let mut args = vec![
-            "process".as_ref(),
-            converted.as_os_str(),
-            "-o".as_ref(),
-            output.as_os_str(),
-            "-q".as_ref(),
-        ];
-        args.extend(pose_args.iter().map(std::ffi::OsStr::new));
-        let out = occmask(&args);
+        let out = process(&converted, &output, pose_args);
         assert!(out.status.success(), "{}", stderr(&out));
         let out = occmask(&["eval".as_ref(), "--json".as_ref(), output.as_os_str()]);
         assert!(out.status.success(), "{}", stderr(&out));
@@ -547,7 +539,7 @@ fn bonn_crowd_through_the_commands_keeps_the_closed_loop_on_the_camera_path() {
 /// `bad_inputs::eval_bad_inputs`.)
 #[test]
 fn eval_reads_the_ground_truth_of_a_sidecar_from_the_file_given() {
-    use crate::common::{convert, larr_fixture, occmask, stderr};
+    use crate::common::{convert, larr_fixture, occmask, process, stderr};
     use std::ffi::OsStr;
 
     let dir = tempfile::tempdir().unwrap();
@@ -555,16 +547,8 @@ fn eval_reads_the_ground_truth_of_a_sidecar_from_the_file_given() {
     let out = convert("larr", &larr_fixture(), &input, &[]);
     assert!(out.status.success(), "{}", stderr(&out));
     let (copy, sidecar) = (dir.path().join("copy.mcap"), dir.path().join("side.mcap"));
-    for (path, extra) in [(&copy, None), (&sidecar, Some("--sidecar"))] {
-        let mut args = vec![
-            "process".as_ref(),
-            input.as_os_str(),
-            "-o".as_ref(),
-            path.as_os_str(),
-            "-q".as_ref(),
-        ];
-        args.extend(extra.map(OsStr::new));
-        let out = occmask(&args);
+    for (path, extra) in [(&copy, &[][..]), (&sidecar, &["--sidecar"][..])] {
+        let out = process(&input, path, extra);
         assert!(out.status.success(), "{}", stderr(&out));
     }
     // `occmask eval PATH EXTRA…`, which must succeed without a warning: its stdout.

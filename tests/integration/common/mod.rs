@@ -54,6 +54,19 @@ pub fn convert(kind: &str, dir: &Path, out: &Path, extra: &[&str]) -> Output {
     occmask(&args)
 }
 
+/// Runs `occmask process INPUT -o OUT -q` with `extra` arguments after them.
+pub fn process(input: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "process".as_ref(),
+        input.as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+        "-q".as_ref(),
+    ];
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
+    occmask(&args)
+}
+
 /// Runs `occmask args` with stdout a pipe whose reader is already gone (`occmask … | head` once
 /// head has exited) and asserts that the process ended on SIGPIPE, as a Unix filter does, with
 /// no panic message; `what` names the case in the assertion messages.
