@@ -3,7 +3,7 @@
 //! Every message uses a Foxglove well-known schema with protobuf encoding (the message structs
 //! and embedded descriptors of the `foxglove` crate), written through [`mcap::Writer`].
 //! The topic and frame names below are the contract between
-//! `occmask convert`, `occmask process` and the viewer; the README's channel table lists them.
+//! `occmask convert`, `occmask process` and the viewer; docs/channels.md lists them.
 //!
 //! - [`codec`]: sans-IO conversion between library types and Foxglove messages;
 //! - [`encoding`]: the image encodings ([`encoding::ColorEncoding`], [`encoding::DepthEncoding`],
