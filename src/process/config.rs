@@ -81,7 +81,9 @@ pub struct ProcessConfig {
     pub anchor: OdometryAnchor,
     /// Only frames with colour stamps at or after this many ns after the first colour image.
     pub start_offset_ns: Option<u64>,
-    /// Only frames before this many ns after the first colour image.
+    /// Only frames before this many ns after the first colour image. Without a copy of the
+    /// input ([`AnnotateOptions::copy_input`] off), the input is read only up to the first
+    /// frame past it (once a frame was processed).
     pub end_offset_ns: Option<u64>,
     /// Measure decode/process times into `/occmask/stats` (makes output bytes
     /// non-deterministic).

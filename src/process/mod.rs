@@ -358,6 +358,12 @@ pub fn process_file<W: Write + Seek + Send>(
                     state.pending.push_back(message);
                 }
                 state.drain(&ctx, &output, make_processor, hooks, false)?;
+                if !copy && state.paths_ended && state.report.frames > 0 {
+                    // A sidecar past the range's last frame: nothing more is written, so the
+                    // rest of the input is not read (with no frame processed, it is, for the
+                    // counts the error reports).
+                    break;
+                }
             }
             state.poses.finish(input.path())?;
             if let Some(anchor) = &mut state.anchor {

@@ -1349,6 +1349,47 @@ fn occmask_in(args: &[OsString], cwd: &Path) -> Output {
 /// at the first frame past the end, and the paths end there, before the input logged after it
 /// rather than at the end of the file (offline and causal).
 #[test]
+fn a_sidecar_stops_reading_the_input_after_the_range() {
+    // Ten frames in several chunks; the last chunk (frames 8 and 9) is damaged.
+    let spec = FixtureSpec { frames: 10, ..spec() };
+    let mut bytes = fixture_bytes(Flavor::Protobuf, &spec);
+    let (chunks, _) = layout(&bytes);
+    assert!(chunks.len() >= 3, "{} chunks", chunks.len());
+    let (start, len) = *chunks.last().unwrap();
+    bytes[(start + len / 2) as usize] ^= 0x55;
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in.mcap");
+    std::fs::write(&input, &bytes).unwrap();
+    // Frames 0 to 2.
+    let end_s = format!("{}", (2 * FRAME_NS + 1_000_000) as f64 / 1e9);
+    for mode in [None, Some("--causal")] {
+        let run = |output: &Path, extra: &[&str]| {
+            let mut args = os(&[&"process", &input, &"-o", &output, &"--end", &end_s, &"-f"]);
+            args.extend(mode.into_iter().chain(extra.iter().copied()).map(OsString::from));
+            occmask(&args)
+        };
+        // The annotated copy needs every message: it reads the damaged chunk and fails.
+        let out = run(&tmp.path().join("out.mcap"), &[]);
+        assert_ne!(out.status.code(), Some(0), "{mode:?}");
+        assert!(
+            stderr(&out).contains("damaged chunk"),
+            "{mode:?}: {}",
+            stderr(&out)
+        );
+        // A sidecar stops at the first frame past the end, long before it.
+        let sidecar = tmp.path().join("side.mcap");
+        let out = run(&sidecar, &["--sidecar"]);
+        assert_eq!(out.status.code(), Some(0), "{mode:?}: {}", stderr(&out));
+        let written = std::fs::read(&sidecar).unwrap();
+        let masks = mcap::MessageStream::new(&written)
+            .unwrap()
+            .filter(|m| m.as_ref().unwrap().channel.topic == "/occmask/mask")
+            .count();
+        assert_eq!(masks, 3, "{mode:?}: frames 0 to 2");
+    }
+}
+
+#[test]
 fn images_outside_the_time_range_are_not_decoded_and_the_paths_end_at_its_last_frame() {
     use process_support::COLOR_TOPIC;
     // Ten frames: three past the end.

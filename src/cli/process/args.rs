@@ -159,7 +159,8 @@ pub struct ProcessArgs {
     #[arg(long, value_parser = parse_seconds)]
     pub start: Option<u64>,
 
-    /// Stop at this many seconds after the first colour image.
+    /// Stop at this many seconds after the first colour image (an annotated copy still copies
+    /// the rest of the input; a sidecar stops reading there).
     #[arg(long, value_parser = parse_seconds)]
     pub end: Option<u64>,
 
