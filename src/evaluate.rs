@@ -20,6 +20,7 @@ use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
 
+use nalgebra::Isometry3;
 use serde::Serialize;
 
 use crate::error::{DecodeProblem, Error, ImageKind, PoseRole, Result};
@@ -128,6 +129,10 @@ pub struct GroundTruthSource<'a> {
     /// The pose channel of the MCAP file (any pose schema `process --pose-topic` reads), instead
     /// of [`TOPIC_GROUNDTRUTH_POSE`]: named, it must be there and hold poses.
     pub pose_topic: Option<&'a str>,
+    /// The ground-truth poses are a marker's (motion capture), and this is the marker's pose in
+    /// the camera frame: the camera's pose is the marker's · the inverse of this, as with
+    /// `process --camera-from-marker`. `None`: they are the camera's.
+    pub camera_from_marker: Option<Isometry3<f64>>,
 }
 
 /// Where the ground truth was read.
@@ -144,6 +149,9 @@ pub struct GroundTruthReport {
     /// that the evaluated file's `occmask.process` record holds otherwise. The scores are still
     /// computed, by stamp.
     pub other_input: Option<InputDifference>,
+    /// [`GroundTruthSource::camera_from_marker`], as `[x, y, z, qx, qy, qz, qw]` (metres, unit
+    /// quaternion).
+    pub camera_from_marker: Option<[f64; 7]>,
 }
 
 /// Where the ground truth is read from.
@@ -396,6 +404,10 @@ pub fn evaluate_against(path: &Path, source: &GroundTruthSource<'_>) -> Result<E
             GroundTruth::Mcap(truth) => recorded_input_difference(&input, truth)?,
             _ => None,
         },
+        camera_from_marker: source.camera_from_marker.map(|c| {
+            let (t, q) = (c.translation.vector, c.rotation.quaternion());
+            [t.x, t.y, t.z, q.i, q.j, q.k, q.w]
+        }),
     };
 
     let (estimated_masks, segmentation) = match mask_channel {
@@ -407,7 +419,7 @@ pub fn evaluate_against(path: &Path, source: &GroundTruthSource<'_>) -> Result<E
         },
     };
 
-    let truth = match truth_source {
+    let mut truth = match truth_source {
         GroundTruth::SameFile => read_truth_poses(&input, pose_topic, source.pose_topic.is_some())?,
         GroundTruth::Mcap(truth) => read_truth_poses(&truth, pose_topic, source.pose_topic.is_some())?,
         GroundTruth::Trajectory(poses) => match source.pose_topic {
@@ -421,6 +433,12 @@ pub fn evaluate_against(path: &Path, source: &GroundTruthSource<'_>) -> Result<E
             }
         },
     };
+    if let Some(camera_from_marker) = source.camera_from_marker {
+        let marker_from_camera = camera_from_marker.inverse();
+        for pose in &mut truth {
+            pose.world_from_camera *= marker_from_camera;
+        }
+    }
     let odometry = if truth.is_empty() || !odometry_present {
         None
     } else {
@@ -553,10 +571,17 @@ pub fn format_report(report: &EvalReport) -> String {
         (GroundTruthKind::Trajectory, Some(_)) => format!("none: {place} is a trajectory (poses only)"),
     };
     let pose_topic = g.pose_topic.as_deref().unwrap_or(TOPIC_GROUNDTRUTH_POSE);
-    if g.file.is_some() || pose_topic != TOPIC_GROUNDTRUTH_POSE {
+    if g.file.is_some() || pose_topic != TOPIC_GROUNDTRUTH_POSE || g.camera_from_marker.is_some() {
         out.push_str(&format!("  ground truth           {place}"));
         if pose_topic != TOPIC_GROUNDTRUTH_POSE {
             out.push_str(&format!(", poses of {pose_topic}"));
+        }
+        if let Some(c) = g.camera_from_marker {
+            let numbers: Vec<String> = c.iter().map(|v| format!("{v:.6}")).collect();
+            out.push_str(&format!(
+                ", a marker's: camera = marker · inverse({})",
+                numbers.join(",")
+            ));
         }
         out.push('\n');
     }

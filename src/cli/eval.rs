@@ -9,6 +9,7 @@ use clap::Args as ClapArgs;
 
 use occmask::evaluate::{evaluate_against, format_report, GroundTruthSource};
 
+use super::options::parse_pose;
 use super::{Globals, Outcome};
 
 const AFTER_HELP: &str = "\
@@ -18,6 +19,7 @@ Examples:
   occmask eval run.sidecar.mcap --groundtruth run.mcap
   occmask eval run.occmask.mcap --groundtruth mocap.txt
   occmask eval run.occmask.mcap --groundtruth-topic /vicon/camera/pose
+  occmask eval run.occmask.mcap --groundtruth mocap.txt --camera-from-marker 0.01,0,0.05,0,0,0,1
 
 F1 is computed per frame against /groundtruth/mask of the same stamp and averaged over frames
 with moving objects; RPE uses delta = 1 frame and 150 frames (or the longest the sequence
@@ -50,6 +52,12 @@ pub struct EvalArgs {
     /// camera_estimated). The poses must be the camera's.
     #[arg(long, value_name = "TOPIC")]
     pub groundtruth_topic: Option<String>,
+
+    /// The ground-truth poses are a motion-capture marker's: its pose in the camera frame,
+    /// X,Y,Z,QX,QY,QZ,QW, or `bonn` (the camera's pose is the marker's · inverse of this, as
+    /// `process --camera-from-marker` reads).
+    #[arg(long, value_name = "POSE", value_parser = parse_pose, allow_hyphen_values = true)]
+    pub camera_from_marker: Option<nalgebra::Isometry3<f64>>,
 }
 
 /// Runs `occmask eval`.
@@ -61,6 +69,7 @@ pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let source = GroundTruthSource {
         file: args.groundtruth.as_deref(),
         pose_topic: args.groundtruth_topic.as_deref(),
+        camera_from_marker: args.camera_from_marker,
     };
     for path in &args.inputs {
         let report = evaluate_against(path, &source).with_context(|| match &args.groundtruth {

@@ -179,7 +179,7 @@ fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
     fn from(file: &Path) -> GroundTruthSource<'_> {
         GroundTruthSource {
             file: Some(file),
-            pose_topic: None,
+            ..GroundTruthSource::default()
         }
     }
     let against = evaluate_against(&sidecar, &from(&input)).unwrap();
@@ -196,6 +196,7 @@ fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
             kind: GroundTruthKind::Mcap,
             pose_topic: Some(GT_TOPIC.to_owned()),
             other_input: None,
+            camera_from_marker: None,
         }
     );
 
@@ -217,6 +218,56 @@ fn a_sidecar_is_scored_against_the_ground_truth_of_its_input_or_a_trajectory() {
             "{a:?} {b:?}"
         );
     }
+
+    // The same camera seen through a marker 10 cm off its optical centre, turned 40° about a
+    // tilted axis: scored as the camera once the marker's pose in the camera is given.
+    let camera_from_marker = nalgebra::Isometry3::new(
+        nalgebra::Vector3::new(0.04, -0.03, 0.08),
+        nalgebra::Vector3::new(0.3, -0.5, 0.4),
+    );
+    let marker: Vec<_> = truth
+        .iter()
+        .map(|p| occmask::trajectory::StampedPose {
+            timestamp_ns: p.timestamp_ns,
+            world_from_camera: p.world_from_camera * camera_from_marker,
+        })
+        .collect();
+    let marker_trajectory = dir.path().join("marker.txt");
+    std::fs::write(&marker_trajectory, occmask::trajectory::to_tum_text(&marker)).unwrap();
+    let through_marker = evaluate_against(
+        &sidecar,
+        &GroundTruthSource {
+            camera_from_marker: Some(camera_from_marker),
+            ..from(&marker_trajectory)
+        },
+    )
+    .unwrap();
+    let marker_odo = through_marker.odometry.unwrap();
+    assert!(
+        (ate(&marker_odo) - ate(&odo)).abs() < 1e-6,
+        "{marker_odo:?} {odo:?}"
+    );
+    for (a, b) in marker_odo.rpe.iter().zip(&odo.rpe) {
+        assert!(
+            (a.translation_rmse_m - b.translation_rmse_m).abs() < 1e-6,
+            "{a:?} {b:?}"
+        );
+        assert!(
+            (a.rotation_rmse_deg - b.rotation_rmse_deg).abs() < 1e-6,
+            "{a:?} {b:?}"
+        );
+    }
+    let c = through_marker.groundtruth.camera_from_marker.unwrap();
+    let q = camera_from_marker.rotation.quaternion();
+    assert_eq!([c[0], c[1], c[2], c[6]], [0.04, -0.03, 0.08, q.w]);
+    // Without it, the marker's poses are scored as the camera's: its motions are not the
+    // camera's (the scores differ by 5 mm, against 1e-6 above).
+    let as_camera = evaluate_against(&sidecar, &from(&marker_trajectory)).unwrap();
+    let wrong = as_camera.odometry.unwrap();
+    assert!(
+        (wrong.rpe[0].translation_rmse_m - odo.rpe[0].translation_rmse_m).abs() > 1e-3,
+        "{wrong:?} {odo:?}"
+    );
 
     // Another recording of the same stamps, 8 frames long: named, scored on its 8 frames.
     let other = dir.path().join("other.mcap");
@@ -588,5 +639,39 @@ fn eval_reads_the_ground_truth_of_a_sidecar_from_the_file_given() {
             && text.contains("is a trajectory (poses only)")
             && text.contains("ATE (4 poses)"),
         "{text}"
+    );
+    // The same trajectory taken as a marker's, 5 cm in front of the camera.
+    let marker = ["--camera-from-marker".as_ref(), "0,0,0.05,0,0,0,1".as_ref()];
+    let text = eval(
+        &sidecar,
+        &[
+            &["--groundtruth".as_ref(), trajectory.as_os_str()][..],
+            &marker[..],
+        ]
+        .concat(),
+    );
+    assert!(
+        text.contains("a marker's: camera = marker · inverse(0.000000,0.000000,0.050000,0.000000,0.000000,0.000000,1.000000)"),
+        "{text}"
+    );
+    let json = eval_json(&copy, &marker);
+    assert_eq!(
+        json["groundtruth"]["camera_from_marker"],
+        serde_json::json!([0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 1.0])
+    );
+    assert_ne!(json["odometry"], reference["odometry"]);
+    // Three numbers are a usage error that says what is expected.
+    let out = occmask(&[
+        "eval".as_ref(),
+        copy.as_os_str(),
+        "--camera-from-marker".as_ref(),
+        "0,0,0.05".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out)
+            .contains("expected X,Y,Z,QX,QY,QZ,QW (metres, unit quaternion), found \"0,0,0.05\": 3 numbers"),
+        "{}",
+        stderr(&out)
     );
 }
