@@ -2,14 +2,15 @@
 //! `--groundtruth-topic`), of each file or of `--groundtruth FILE` (an MCAP file or a TUM
 //! trajectory).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use anyhow::{bail, Context};
 use clap::Args as ClapArgs;
 
 use occmask::evaluate::{evaluate_against, format_report, GroundTruthSource};
 
 use super::options::parse_pose;
+use super::process::{input_name, OUTPUT_SUFFIX};
 use super::{Globals, Outcome};
 
 const AFTER_HELP: &str = "\
@@ -17,6 +18,7 @@ Examples:
   occmask eval run.occmask.mcap
   occmask eval a.occmask.mcap b.occmask.mcap --json > scores.jsonl
   occmask eval run.sidecar.mcap --groundtruth run.mcap
+  occmask eval out/*.occmask.mcap --groundtruth recordings/   (out/X.occmask.mcap vs recordings/X.mcap)
   occmask eval run.occmask.mcap --groundtruth mocap.txt
   occmask eval run.occmask.mcap --groundtruth-topic /vicon/camera/pose
   occmask eval run.occmask.mcap --groundtruth mocap.txt --camera-from-marker 0.01,0,0.05,0,0,0,1
@@ -42,7 +44,8 @@ pub struct EvalArgs {
     /// Read the ground truth from FILE instead of from each input: an MCAP file with
     /// /groundtruth/mask and /groundtruth/pose (the input of a `process --sidecar` run), or a
     /// TUM trajectory of the camera (`timestamp tx ty tz qx qy qz qw` per line, seconds and
-    /// metres; poses only). Matched by stamp.
+    /// metres; poses only). Matched by stamp. A folder: each input X.occmask.mcap (as `process
+    /// --out-dir` names its outputs) against the folder's X.mcap.
     #[arg(long, value_name = "FILE")]
     pub groundtruth: Option<PathBuf>,
 
@@ -60,25 +63,52 @@ pub struct EvalArgs {
     pub camera_from_marker: Option<nalgebra::Isometry3<f64>>,
 }
 
+/// The input in `folder` that `output` was made from, by the name `process --out-dir` gave it.
+fn input_in(folder: &Path, output: &Path) -> anyhow::Result<PathBuf> {
+    let Some(name) = input_name(output) else {
+        bail!(
+            "{}: --groundtruth {} is a folder, which pairs each X{OUTPUT_SUFFIX} (the name `process \
+             --out-dir` gives) with the folder's X.mcap, and this name does not end in {OUTPUT_SUFFIX}; \
+             pass its input with --groundtruth FILE",
+            output.display(),
+            folder.display()
+        );
+    };
+    let input = folder.join(name);
+    if !input.is_file() {
+        bail!(
+            "{}: its input {} is not there (--groundtruth {} pairs X{OUTPUT_SUFFIX} with the folder's \
+             X.mcap); pass its input with --groundtruth FILE",
+            output.display(),
+            input.display(),
+            folder.display()
+        );
+    }
+    Ok(input)
+}
+
 /// Runs `occmask eval`.
 ///
 /// # Errors
 /// The first file that cannot be read or has no occmask channels.
 pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let mut outcome = Outcome::Success;
-    let source = GroundTruthSource {
-        file: args.groundtruth.as_deref(),
-        pose_topic: args.groundtruth_topic.as_deref(),
-        camera_from_marker: args.camera_from_marker,
-    };
+    let folder = args.groundtruth.as_deref().filter(|p| p.is_dir());
     for path in &args.inputs {
-        let report = evaluate_against(path, &source).with_context(|| match &args.groundtruth {
+        let truth = match folder {
+            Some(folder) => Some(input_in(folder, path)?),
+            None => args.groundtruth.clone(),
+        };
+        let source = GroundTruthSource {
+            file: truth.as_deref(),
+            pose_topic: args.groundtruth_topic.as_deref(),
+            camera_from_marker: args.camera_from_marker,
+        };
+        let report = evaluate_against(path, &source).with_context(|| match &truth {
             None => format!("evaluating {}", path.display()),
             Some(truth) => format!("evaluating {} against {}", path.display(), truth.display()),
         })?;
-        if let (Some(d), Some(truth), false) =
-            (&report.groundtruth.other_input, &args.groundtruth, globals.quiet)
-        {
+        if let (Some(d), Some(truth), false) = (&report.groundtruth.other_input, &truth, globals.quiet) {
             eprintln!(
                 "warning: {} was not made from {}: the input it records has {} {}, that file {}; \
                  scored against that file's ground truth by stamp anyway",

@@ -66,12 +66,23 @@ fn failure_text(error: anyhow::Error) -> String {
     format!("{:#}", super::hints::with_hint(error))
 }
 
+/// What `process --out-dir` appends to an input's stem.
+pub(super) const OUTPUT_SUFFIX: &str = ".occmask.mcap";
+
 fn output_name(input: &Path) -> PathBuf {
     let stem = input
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    PathBuf::from(format!("{stem}.occmask.mcap"))
+    PathBuf::from(format!("{stem}{OUTPUT_SUFFIX}"))
+}
+
+/// The name of the `.mcap` input that `process --out-dir` named `output` after (`X.occmask.mcap`
+/// → `X.mcap`); `None` for another name.
+pub(super) fn input_name(output: &Path) -> Option<PathBuf> {
+    let name = output.file_name()?.to_str()?;
+    let stem = name.strip_suffix(OUTPUT_SUFFIX).filter(|s| !s.is_empty())?;
+    Some(PathBuf::from(format!("{stem}.mcap")))
 }
 
 fn plan(args: &ProcessArgs) -> anyhow::Result<Vec<Job>> {

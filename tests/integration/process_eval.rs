@@ -675,3 +675,88 @@ fn eval_reads_the_ground_truth_of_a_sidecar_from_the_file_given() {
         stderr(&out)
     );
 }
+
+#[test]
+fn eval_pairs_each_output_with_its_input_in_a_ground_truth_folder() {
+    use crate::common::{convert, larr_fixture, occmask, stderr};
+    use std::ffi::OsStr;
+
+    let dir = tempfile::tempdir().unwrap();
+    let recordings = dir.path().join("recordings");
+    std::fs::create_dir(&recordings).unwrap();
+    let (a, b) = (recordings.join("a.mcap"), recordings.join("b.mcap"));
+    let out = convert("larr", &larr_fixture(), &a, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    std::fs::write(&b, fixture_bytes(Flavor::Protobuf, &FixtureSpec::default())).unwrap();
+    // Sidecars and annotated copies of both, named by --out-dir.
+    let run = |args: &[&OsStr]| {
+        let out = occmask(args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let (sidecars, copies) = (dir.path().join("sidecars"), dir.path().join("copies"));
+    for (folder, extra) in [(&sidecars, Some("--sidecar")), (&copies, None)] {
+        std::fs::create_dir(folder).unwrap();
+        let mut args = vec!["process".as_ref(), a.as_os_str(), b.as_os_str(), "-q".as_ref()];
+        args.extend(["--out-dir".as_ref(), folder.as_os_str()]);
+        args.extend(extra.map(OsStr::new));
+        run(&args);
+    }
+    let outputs = [sidecars.join("a.occmask.mcap"), sidecars.join("b.occmask.mcap")];
+    let eval_lines = |args: &[&OsStr]| -> Vec<serde_json::Value> {
+        run(&[&["eval".as_ref(), "--json".as_ref()], args].concat())
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    };
+    let scored = eval_lines(&[
+        outputs[0].as_os_str(),
+        outputs[1].as_os_str(),
+        "--groundtruth".as_ref(),
+        recordings.as_os_str(),
+    ]);
+    let references = eval_lines(&[
+        copies.join("a.occmask.mcap").as_os_str(),
+        copies.join("b.occmask.mcap").as_os_str(),
+    ]);
+    for ((s, r), input) in scored.iter().zip(&references).zip([&a, &b]) {
+        assert_eq!(s["groundtruth"]["file"], input.display().to_string());
+        assert_eq!(s["groundtruth"]["other_input"], serde_json::Value::Null);
+        for part in ["estimated_masks", "segmentation", "odometry"] {
+            assert_eq!(s[part], r[part], "{part} of {input:?}");
+            assert_ne!(s[part], serde_json::Value::Null, "{part} of {input:?}");
+        }
+    }
+    assert_ne!(scored[0]["odometry"], scored[1]["odometry"]);
+
+    // An output whose input is not in the folder, and one not named by --out-dir.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let renamed = dir.path().join("renamed.mcap");
+    std::fs::copy(&outputs[0], &renamed).unwrap();
+    for (output, folder, expected) in [
+        (
+            &outputs[0],
+            &empty,
+            format!("its input {} is not there", empty.join("a.mcap").display()),
+        ),
+        (
+            &renamed,
+            &recordings,
+            "this name does not end in .occmask.mcap".to_owned(),
+        ),
+    ] {
+        let out = occmask(&[
+            "eval".as_ref(),
+            output.as_os_str(),
+            "--groundtruth".as_ref(),
+            folder.as_os_str(),
+        ]);
+        assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+        assert!(
+            stderr(&out).contains(&expected) && stderr(&out).contains("--groundtruth FILE"),
+            "{}",
+            stderr(&out)
+        );
+    }
+}
