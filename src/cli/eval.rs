@@ -1,6 +1,6 @@
 //! `occmask eval`: F1 against `/groundtruth/mask`, RPE and ATE against `/groundtruth/pose` (or
-//! `--groundtruth-topic`), of each file or of `--groundtruth FILE` (an MCAP file or a TUM
-//! trajectory).
+//! `--groundtruth-topic`, a marker's poses with `--camera-from-marker`), of each file or of
+//! `--groundtruth FILE` (an MCAP file or a TUM trajectory; a folder: each output's input).
 
 use std::path::{Path, PathBuf};
 
@@ -90,7 +90,8 @@ fn input_in(folder: &Path, output: &Path) -> anyhow::Result<PathBuf> {
 /// Runs `occmask eval`.
 ///
 /// # Errors
-/// The first file that cannot be read or has no occmask channels.
+/// The first file that cannot be read, has no occmask channels, or whose input a
+/// `--groundtruth` folder does not hold.
 pub fn run(args: EvalArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let mut outcome = Outcome::Success;
     let folder = args.groundtruth.as_deref().filter(|p| p.is_dir());
