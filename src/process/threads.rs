@@ -55,38 +55,19 @@ pub const WRITE_QUEUE_MAX_OPS: usize = 4096;
 impl Prefetched {
     /// What the item holds in memory, for the prefetch queue's budget.
     pub(super) fn bytes(&self) -> usize {
-        let pixels = match &self.image {
-            Some((
-                _,
-                Queued {
-                    pixels: Pixels::Gray(g),
-                    ..
-                },
-            )) => std::mem::size_of_val(g.as_slice()),
-            Some((
-                _,
-                Queued {
-                    pixels: Pixels::Depth(d),
-                    ..
-                },
-            )) => std::mem::size_of_val(d.as_slice()),
-            Some((
-                _,
-                Queued {
-                    pixels: Pixels::Skipped,
-                    ..
-                },
-            ))
-            | None => 0,
-        };
-        let colors = match &self.image {
-            Some((_, q)) => q
+        let image = self.image.as_ref().map_or(0, |(_, q)| {
+            let pixels = match &q.pixels {
+                Pixels::Gray(g) => std::mem::size_of_val(g.as_slice()),
+                Pixels::Depth(d) => std::mem::size_of_val(d.as_slice()),
+                Pixels::Skipped => 0,
+            };
+            let colors = q
                 .point_colors
                 .as_ref()
-                .map_or(0, |c| std::mem::size_of_val(c.as_slice())),
-            None => 0,
-        };
-        self.message.data.len() + pixels + colors
+                .map_or(0, |c| std::mem::size_of_val(c.as_slice()));
+            pixels + colors
+        });
+        self.message.data.len() + image
     }
 }
 
