@@ -165,6 +165,8 @@ pub struct DvoEstimator {
     /// Ignore mask per level, 0/1 (level 0 only allocated when it is used).
     ignore: Vec<Vec<u8>>,
     column_scratch: Vec<u32>,
+    /// Scratch of [`push_row_points`]: one row's kept flags.
+    row_keep: Vec<u8>,
     /// Of the finest level's usable reference pixels, the fraction the ignore mask removed
     /// (set by [`Self::prepare_reference`]).
     ignored_fraction: f64,
@@ -216,6 +218,7 @@ impl DvoEstimator {
             points,
             ignore,
             column_scratch: Vec::with_capacity(size.width),
+            row_keep: Vec::with_capacity(size.width),
             ignored_fraction: 0.0,
         })
     }
@@ -307,7 +310,11 @@ impl DvoEstimator {
             let depth = level.depth_m.as_slice();
             let gray = level.gray.as_slice();
             let ignore = &self.ignore[l];
-            let min_grad_sq = cfg.min_gradient_per_px * cfg.min_gradient_per_px;
+            let tests = PointTests {
+                min_depth_m: cfg.min_depth_m,
+                max_depth_m: cfg.max_depth_m,
+                min_grad_sq: cfg.min_gradient_per_px * cfg.min_gradient_per_px,
+            };
             // Row by row (no division per pixel); the tests are the same for every pixel.
             for (y, ((depth_row, gray_row), sample_row)) in depth
                 .chunks_exact(w)
@@ -315,34 +322,20 @@ impl DvoEstimator {
                 .zip(level.samples.chunks_exact(w))
                 .enumerate()
             {
-                let ignore_row = if have_mask {
-                    &ignore[y * w..(y + 1) * w]
-                } else {
-                    &[][..]
+                let row = PointRow {
+                    depth_m: depth_row,
+                    gray: gray_row,
+                    samples: sample_row,
+                    ignore: if have_mask {
+                        &ignore[y * w..(y + 1) * w]
+                    } else {
+                        &[][..]
+                    },
+                    ray_y: (y as f32 - cy) * fy_inv,
+                    cx,
+                    fx_inv,
                 };
-                let ray_y = (y as f32 - cy) * fy_inv;
-                // Branch-free compaction: every pixel's point is written at the next free
-                // slot, which only a kept point advances (whether a pixel is kept is as good
-                // as random on textured depth, so branches mispredicted).
-                let start = pts.len();
-                pts.resize(start + w, ReferencePoint::default());
-                let row_points = &mut pts[start..];
-                let mut kept = 0usize;
-                for (x, ((&z, &g), sample)) in depth_row.iter().zip(gray_row).zip(sample_row).enumerate() {
-                    let (gx, gy) = (sample.0[TargetSample::GRAD_X], sample.0[TargetSample::GRAD_Y]);
-                    let grad_sq = gx * gx + gy * gy;
-                    // A NaN gradient passes (any gradient passes a threshold of 0).
-                    let usable = (z > 0.0 && z >= cfg.min_depth_m && z <= cfg.max_depth_m)
-                        & ((grad_sq >= min_grad_sq) | grad_sq.is_nan());
-                    let masked = have_mask && ignore_row[x] != 0;
-                    row_points[kept] = ReferencePoint {
-                        point_m: [(x as f32 - cx) * fx_inv * z, ray_y * z, z],
-                        intensity: g,
-                    };
-                    kept += usize::from(usable & !masked);
-                    ignored += usize::from(usable & masked);
-                }
-                pts.truncate(start + kept);
+                ignored += push_row_points(&row, &tests, &mut self.row_keep, pts);
             }
             if l == finest {
                 self.ignored_fraction = ignored as f64 / (ignored + pts.len()).max(1) as f64;
@@ -814,6 +807,90 @@ impl DvoTracker {
             expected: "a reference frame (internal error)".into(),
         })
     }
+}
+
+/// The tests a reference pixel passes to become a point (the same for every pixel of a level).
+#[derive(Debug, Clone, Copy)]
+struct PointTests {
+    min_depth_m: f32,
+    max_depth_m: f32,
+    /// The squared minimum intensity gradient per pixel.
+    min_grad_sq: f32,
+}
+
+impl PointTests {
+    /// Depth in range and a gradient at the minimum or above (a NaN gradient passes: any
+    /// gradient passes a threshold of 0).
+    #[inline]
+    fn usable(&self, z: f32, sample: &TargetSample) -> bool {
+        let (gx, gy) = (sample.0[TargetSample::GRAD_X], sample.0[TargetSample::GRAD_Y]);
+        let grad_sq = gx * gx + gy * gy;
+        (z > 0.0)
+            & (z >= self.min_depth_m)
+            & (z <= self.max_depth_m)
+            & ((grad_sq >= self.min_grad_sq) | grad_sq.is_nan())
+    }
+}
+
+/// One row of a pyramid level as the point selection reads it.
+struct PointRow<'a> {
+    depth_m: &'a [f32],
+    gray: &'a [f32],
+    samples: &'a [TargetSample],
+    /// Nonzero = ignored; empty = nothing ignored.
+    ignore: &'a [u8],
+    /// The row's ray slope (y − cy) / fy, and the level's cx and 1 / fx.
+    ray_y: f32,
+    cx: f32,
+    fx_inv: f32,
+}
+
+/// Appends the reference points of `row` to `points` in column order: the pixels that pass
+/// `tests` and that `row.ignore` does not mark. Returns how many passing pixels it marks.
+///
+/// Two passes: the flags of every pixel (branch-free), then the points of the flagged pixels,
+/// eight flags at a time (whether a pixel is kept is as good as random on textured depth, so a
+/// branch per pixel mispredicts, and writing every pixel's point at the next free slot wrote
+/// twice as much as is kept). `keep` is scratch.
+fn push_row_points(
+    row: &PointRow<'_>,
+    tests: &PointTests,
+    keep: &mut Vec<u8>,
+    points: &mut Vec<ReferencePoint>,
+) -> usize {
+    let width = row.depth_m.len();
+    keep.clear();
+    keep.resize(width, 0);
+    let mut ignored = 0usize;
+    if row.ignore.is_empty() {
+        for ((k, &z), sample) in keep.iter_mut().zip(row.depth_m).zip(row.samples) {
+            *k = u8::from(tests.usable(z, sample));
+        }
+    } else {
+        for (((k, &z), sample), &m) in keep.iter_mut().zip(row.depth_m).zip(row.samples).zip(row.ignore) {
+            let usable = tests.usable(z, sample);
+            let masked = m != 0;
+            *k = u8::from(usable & !masked);
+            ignored += usize::from(usable & masked);
+        }
+    }
+    points.reserve(width);
+    for (chunk_index, chunk) in keep.chunks(8).enumerate() {
+        let mut bytes = [0u8; 8];
+        bytes[..chunk.len()].copy_from_slice(chunk);
+        // Each kept pixel is one set bit, the lowest of its byte.
+        let mut flags = u64::from_le_bytes(bytes);
+        while flags != 0 {
+            let x = chunk_index * 8 + (flags.trailing_zeros() / 8) as usize;
+            let z = row.depth_m[x];
+            points.push(ReferencePoint {
+                point_m: [(x as f32 - row.cx) * row.fx_inv * z, row.ray_y * z, z],
+                intensity: row.gray[x],
+            });
+            flags &= flags - 1;
+        }
+    }
+    ignored
 }
 
 #[cfg(test)]
