@@ -859,7 +859,7 @@ fn push_row_points(
     points: &mut Vec<ReferencePoint>,
 ) -> usize {
     let width = row.depth_m.len();
-    keep.clear();
+    // Every flag is written below: only a change of width (a new level) resizes.
     keep.resize(width, 0);
     let mut ignored = 0usize;
     if row.ignore.is_empty() {
