@@ -312,7 +312,7 @@ pub fn downsample_depth_into(src: &DepthMeters, dst: &mut DepthMeters) -> Result
         return Ok(());
     }
     let src = src.as_slice();
-    let clean = |z: f32| if z.is_finite() && z > 0.0 { z } else { 0.0 };
+    let simd = Simd::detect();
     dst.as_mut_slice()
         .par_chunks_mut(dw * ROWS_PER_TASK)
         .enumerate()
@@ -321,18 +321,32 @@ pub fn downsample_depth_into(src: &DepthMeters, dst: &mut DepthMeters) -> Result
                 let y = chunk * ROWS_PER_TASK + r;
                 let a = &src[2 * y * sw..2 * y * sw + 2 * dw];
                 let b = &src[(2 * y + 1) * sw..(2 * y + 1) * sw + 2 * dw];
-                for (x, o) in out.iter_mut().enumerate() {
-                    *o = edge_aware_depth([
-                        clean(a[2 * x]),
-                        clean(a[2 * x + 1]),
-                        clean(b[2 * x]),
-                        clean(b[2 * x + 1]),
-                    ]);
-                }
+                downsample_depth_row(simd, a, b, out);
             }
         });
     Ok(())
 }
+
+/// One output row of [`downsample_depth_into`] from its two source rows.
+#[inline(always)]
+fn downsample_depth_row_generic(a: &[f32], b: &[f32], out: &mut [f32]) {
+    let clean = |z: f32| if z.is_finite() && z > 0.0 { z } else { 0.0 };
+    for (x, o) in out.iter_mut().enumerate() {
+        *o = edge_aware_depth([
+            clean(a[2 * x]),
+            clean(a[2 * x + 1]),
+            clean(b[2 * x]),
+            clean(b[2 * x + 1]),
+        ]);
+    }
+}
+
+simd_kernel!(
+    downsample_depth_row,
+    downsample_depth_row_avx2,
+    downsample_depth_row_generic,
+    (a: &[f32], b: &[f32], out: &mut [f32])
+);
 
 /// Depth derivative at a valid centre from its neighbours (0 = invalid or outside): central
 /// difference when both neighbours are on the centre's surface (within

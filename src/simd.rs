@@ -1,24 +1,41 @@
-//! One kernel body, two builds: for the x86-64 baseline (SSE2) and with AVX2 + FMA enabled,
-//! chosen at run time ([`Simd::detect`]). With AVX2 the compiler evaluates the same loops 8
-//! lanes wide. No kernel calls `mul_add` (and Rust never fuses a multiply and an add by
-//! itself), so both builds compute bit-identical results; each kernel's tests compare it with
-//! a per-pixel reference.
+//! One kernel body, three builds: for the x86-64 baseline (SSE2), with AVX2 + FMA enabled and
+//! with AVX-512 enabled, chosen at run time ([`Simd::detect`]). With AVX2 the compiler evaluates
+//! the same loops 8 lanes wide; AVX-512 adds wider registers, twice as many of them, and masked
+//! and mixed-width instructions. No kernel calls `mul_add` (and Rust never fuses a multiply and
+//! an add by itself), so all builds compute bit-identical results; each kernel's tests compare
+//! it with a per-pixel reference.
 
 /// Which build of a kernel runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Simd {
     /// The x86-64 baseline (or any other architecture).
     Baseline,
     /// AVX2 + FMA (x86-64 only, chosen at run time when the CPU has them).
     Avx2,
+    /// AVX-512 (F, BW, DQ, VL) with AVX2 + FMA: x86-64-v4's vector set.
+    Avx512,
 }
 
 impl Simd {
+    /// Every build, narrowest first.
+    pub const ALL: [Self; 3] = [Self::Baseline, Self::Avx2, Self::Avx512];
+
+    /// Every build this CPU runs, narrowest first (what a kernel's tests compare).
+    pub fn available() -> impl Iterator<Item = Self> {
+        let widest = Self::detect();
+        Self::ALL.into_iter().filter(move |&simd| simd <= widest)
+    }
+
     /// The widest build this CPU runs.
     pub fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            use std::is_x86_feature_detected as has;
+            let avx2 = has!("avx2") && has!("fma");
+            if avx2 && has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") {
+                return Self::Avx512;
+            }
+            if avx2 {
                 return Self::Avx2;
             }
         }
@@ -27,15 +44,18 @@ impl Simd {
 }
 
 /// `fn $name(simd, args…)`: runs `$generic(args…)` (an `#[inline(always)]` body) from a
-/// baseline or an AVX2 + FMA function. Both are separate non-inlined functions whose slice
-/// arguments the compiler knows do not alias. Const generic parameters, if given
-/// (`$generic<const N: usize, …>`), become the kernel's own.
+/// baseline, an AVX2 + FMA or an AVX-512 function. Each is a separate non-inlined function
+/// whose slice arguments the compiler knows do not alias. Const generic parameters, if given
+/// (`$generic<const N: usize, …>`), become the kernel's own. A trailing `widest = Avx2` keeps a
+/// kernel off its AVX-512 build where that build measured slower (the gathers: the compiler
+/// turns them into AVX-512 gather instructions, slower there than the AVX2 build).
 macro_rules! simd_kernel {
     (
         $name:ident,
         $avx2:ident,
         $generic:ident $(<$(const $g:ident: $gt:ty),+>)?,
         ($($arg:ident: $ty:ty),*) $(-> $ret:ty)?
+        $(, widest = $widest:ident)?
     ) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2,fma")]
@@ -49,9 +69,20 @@ macro_rules! simd_kernel {
         fn $name $(<$(const $g: $gt),+>)? (simd: $crate::simd::Simd, $($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
             {
-                if simd == $crate::simd::Simd::Avx2 {
+                #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma")]
+                #[allow(clippy::too_many_arguments)]
+                unsafe fn avx512 $(<$(const $g: $gt),+>)? ($($arg: $ty),*) $(-> $ret)? {
+                    $generic $(::<$($g),+>)? ($($arg),*)
+                }
+                #[allow(unused_variables)]
+                let widest = $crate::simd::Simd::Avx512;
+                $(let widest = $crate::simd::Simd::$widest;)?
+                match simd.min(widest) {
+                    // SAFETY: `Simd::Avx512` is only chosen when the CPU has these features.
+                    $crate::simd::Simd::Avx512 => return unsafe { avx512 $(::<$($g),+>)? ($($arg),*) },
                     // SAFETY: `Simd::Avx2` is only chosen when the CPU has AVX2 and FMA.
-                    return unsafe { $avx2 $(::<$($g),+>)? ($($arg),*) };
+                    $crate::simd::Simd::Avx2 => return unsafe { $avx2 $(::<$($g),+>)? ($($arg),*) },
+                    $crate::simd::Simd::Baseline => {}
                 }
             }
             let _ = simd;

@@ -76,6 +76,7 @@ use crate::geometry::se3::is_finite_pose;
 use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use crate::pyramid::{level_size, ImagePyramid, TargetSample};
+use crate::simd::{simd_kernel, Simd};
 use residuals::TargetView;
 use solver::{LevelError, LmSchedule};
 
@@ -167,6 +168,8 @@ pub struct DvoEstimator {
     column_scratch: Vec<u32>,
     /// Scratch of [`push_row_points`]: one row's kept flags.
     row_keep: Vec<u8>,
+    /// The build of the row selection that runs (the widest the CPU has).
+    simd: Simd,
     /// Of the finest level's usable reference pixels, the fraction the ignore mask removed
     /// (set by [`Self::prepare_reference`]).
     ignored_fraction: f64,
@@ -219,6 +222,7 @@ impl DvoEstimator {
             ignore,
             column_scratch: Vec::with_capacity(size.width),
             row_keep: Vec::with_capacity(size.width),
+            simd: Simd::detect(),
             ignored_fraction: 0.0,
         })
     }
@@ -316,6 +320,7 @@ impl DvoEstimator {
                 min_grad_sq: cfg.min_gradient_per_px * cfg.min_gradient_per_px,
             };
             // Row by row (no division per pixel); the tests are the same for every pixel.
+            let simd = self.simd;
             for (y, ((depth_row, gray_row), sample_row)) in depth
                 .chunks_exact(w)
                 .zip(gray.chunks_exact(w))
@@ -335,7 +340,7 @@ impl DvoEstimator {
                     cx,
                     fx_inv,
                 };
-                ignored += push_row_points(&row, &tests, &mut self.row_keep, pts);
+                ignored += push_row_points(simd, &row, &tests, &mut self.row_keep, pts);
             }
             if l == finest {
                 self.ignored_fraction = ignored as f64 / (ignored + pts.len()).max(1) as f64;
@@ -852,7 +857,8 @@ struct PointRow<'a> {
 /// eight flags at a time (whether a pixel is kept is as good as random on textured depth, so a
 /// branch per pixel mispredicts, and writing every pixel's point at the next free slot wrote
 /// twice as much as is kept). `keep` is scratch.
-fn push_row_points(
+#[inline(always)]
+fn push_row_points_generic(
     row: &PointRow<'_>,
     tests: &PointTests,
     keep: &mut Vec<u8>,
@@ -892,6 +898,13 @@ fn push_row_points(
     }
     ignored
 }
+
+simd_kernel!(
+    push_row_points,
+    push_row_points_avx2,
+    push_row_points_generic,
+    (row: &PointRow<'_>, tests: &PointTests, keep: &mut Vec<u8>, points: &mut Vec<ReferencePoint>) -> usize
+);
 
 #[cfg(test)]
 mod tests;

@@ -201,66 +201,74 @@ fn check_reference_points(size: ImageSize, with_mask: bool) {
     let mask = Mask::from_fn(size, |x, y| if (x / 8 + y / 8) % 3 == 0 { 255 } else { 0 });
     let mut pyr = ImagePyramid::new(size, presets::TUM_FR2, 3, 0).unwrap();
     pyr.build(&gray, &depth).unwrap();
-    let mut est = DvoEstimator::new(size, config).unwrap();
-    est.prepare_reference(&pyr, with_mask.then_some(&mask)).unwrap();
-    let min_grad_sq = config.min_gradient_per_px * config.min_gradient_per_px;
-    for l in 0..config.levels {
-        let level = pyr.level(l).unwrap();
-        let k = level.intrinsics;
-        let w = level.size().width;
-        let ignore = &est.ignore[l];
-        let (mut expected, mut ignored) = (Vec::new(), 0usize);
-        for (i, s) in level.samples.iter().enumerate() {
-            let z = level.depth_m.as_slice()[i];
-            let (gx, gy) = (s.0[TargetSample::GRAD_X], s.0[TargetSample::GRAD_Y]);
-            let grad_sq = gx * gx + gy * gy;
-            let usable = z > 0.0
-                && z >= config.min_depth_m
-                && z <= config.max_depth_m
-                && (grad_sq >= min_grad_sq || grad_sq.is_nan());
-            if !usable {
-                continue;
+    // Every build of the row selection the CPU runs.
+    for simd in Simd::available() {
+        let mut est = DvoEstimator::new(size, config).unwrap();
+        est.simd = simd;
+        est.prepare_reference(&pyr, with_mask.then_some(&mask)).unwrap();
+        let min_grad_sq = config.min_gradient_per_px * config.min_gradient_per_px;
+        for l in 0..config.levels {
+            let level = pyr.level(l).unwrap();
+            let k = level.intrinsics;
+            let w = level.size().width;
+            let ignore = &est.ignore[l];
+            let (mut expected, mut ignored) = (Vec::new(), 0usize);
+            for (i, s) in level.samples.iter().enumerate() {
+                let z = level.depth_m.as_slice()[i];
+                let (gx, gy) = (s.0[TargetSample::GRAD_X], s.0[TargetSample::GRAD_Y]);
+                let grad_sq = gx * gx + gy * gy;
+                let usable = z > 0.0
+                    && z >= config.min_depth_m
+                    && z <= config.max_depth_m
+                    && (grad_sq >= min_grad_sq || grad_sq.is_nan());
+                if !usable {
+                    continue;
+                }
+                if with_mask && ignore[i] != 0 {
+                    ignored += 1;
+                    continue;
+                }
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                expected.push(ReferencePoint {
+                    point_m: [
+                        (x - k.cx as f32) * (1.0 / k.fx as f32) * z,
+                        (y - k.cy as f32) * (1.0 / k.fy as f32) * z,
+                        z,
+                    ],
+                    intensity: level.gray.as_slice()[i],
+                });
             }
-            if with_mask && ignore[i] != 0 {
-                ignored += 1;
-                continue;
-            }
-            let (x, y) = ((i % w) as f32, (i / w) as f32);
-            expected.push(ReferencePoint {
-                point_m: [
-                    (x - k.cx as f32) * (1.0 / k.fx as f32) * z,
-                    (y - k.cy as f32) * (1.0 / k.fy as f32) * z,
-                    z,
-                ],
-                intensity: level.gray.as_slice()[i],
-            });
-        }
-        let bits = |p: &[ReferencePoint]| -> Vec<[u32; 4]> {
-            p.iter()
-                .map(|p| [p.point_m[0], p.point_m[1], p.point_m[2], p.intensity].map(f32::to_bits))
-                .collect()
-        };
-        assert_eq!(bits(est.reference_points(l)), bits(&expected), "{size} level {l}");
-        assert!(!expected.is_empty(), "{size} level {l}: no point kept");
-        if l == 0 {
-            assert!(
-                expected.len() > 100 && (ignored > 100 || !with_mask),
-                "{} kept, {ignored} ignored",
-                expected.len()
-            );
+            let bits = |p: &[ReferencePoint]| -> Vec<[u32; 4]> {
+                p.iter()
+                    .map(|p| [p.point_m[0], p.point_m[1], p.point_m[2], p.intensity].map(f32::to_bits))
+                    .collect()
+            };
             assert_eq!(
-                est.ignored_fraction,
-                ignored as f64 / (ignored + expected.len()) as f64
+                bits(est.reference_points(l)),
+                bits(&expected),
+                "{simd:?} {size} level {l}"
             );
-            let nan_kept = est
-                .reference_points(0)
-                .iter()
-                .filter(|p| p.intensity.is_nan())
-                .count();
-            assert!(
-                nan_kept > 0,
-                "no NaN-gradient pixel kept: the case is not exercised"
-            );
+            assert!(!expected.is_empty(), "{simd:?} {size} level {l}: no point kept");
+            if l == 0 {
+                assert!(
+                    expected.len() > 100 && (ignored > 100 || !with_mask),
+                    "{} kept, {ignored} ignored",
+                    expected.len()
+                );
+                assert_eq!(
+                    est.ignored_fraction,
+                    ignored as f64 / (ignored + expected.len()) as f64
+                );
+                let nan_kept = est
+                    .reference_points(0)
+                    .iter()
+                    .filter(|p| p.intensity.is_nan())
+                    .count();
+                assert!(
+                    nan_kept > 0,
+                    "no NaN-gradient pixel kept: the case is not exercised"
+                );
+            }
         }
     }
 }

@@ -46,6 +46,7 @@ use crate::contour::{outer_contours, ContourOptions};
 use crate::error::{Error, Result};
 use crate::image_buf::{Image, Mask, MASK_SET};
 use crate::point_cloud::{OFFSET_RED, OFFSET_X, OFFSET_Y, OFFSET_Z, POINT_STRIDE_BYTES};
+use crate::simd::{simd_kernel, Simd};
 
 use super::codec;
 use super::encoding::DepthEncoding;
@@ -636,5 +637,34 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
 
 /// Number of pixels set in `mask`.
 pub fn moving_pixels(mask: &Mask) -> u64 {
-    mask.as_slice().iter().filter(|&&v| v == MASK_SET).count() as u64
+    count_set(Simd::detect(), mask.as_slice()) as u64
+}
+
+#[inline(always)]
+fn count_set_generic(mask: &[u8]) -> usize {
+    mask.iter().filter(|&&v| v == MASK_SET).count()
+}
+
+simd_kernel!(count_set, count_set_avx2, count_set_generic, (mask: &[u8]) -> usize);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every build counts the set pixels only (not other nonzero values), as a per-pixel loop.
+    #[test]
+    fn every_build_counts_the_set_pixels() {
+        let mask: Vec<u8> = (0..1001u32)
+            .map(|i| [0, MASK_SET, 1, 254, MASK_SET][(i % 5) as usize])
+            .collect();
+        let mut set = 0;
+        for &v in &mask {
+            if v == MASK_SET {
+                set += 1;
+            }
+        }
+        for simd in Simd::available() {
+            assert_eq!(count_set(simd, &mask), set, "{simd:?}");
+        }
+    }
 }

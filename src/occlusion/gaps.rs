@@ -12,6 +12,7 @@
 
 use crate::error::{Error, Result};
 use crate::image_buf::{DepthMeters, ImageSize, Mask, MASK_SET};
+use crate::simd::{simd_kernel, Simd};
 
 /// [`Self::fill`]'s scratch, allocated once for an image size.
 #[derive(Debug, Clone)]
@@ -89,11 +90,12 @@ impl InvalidDepthGaps {
         // `max_gap_px`, as is one that began above it.
         self.run_start.fill(usize::MAX);
         self.in_column_run.fill(0);
+        let simd = Simd::detect();
         for y in rows.start..=rows.end {
             let row = y * w;
             let open = &mut self.open[..];
             if y < rows.end {
-                open_pixels(&m[row..row + w], &depth[row..row + w], open);
+                open_pixels(simd, &m[row..row + w], &depth[row..row + w], open);
             } else {
                 open.fill(0);
             }
@@ -163,11 +165,19 @@ impl InvalidDepthGaps {
 const COLUMN_CHUNK: usize = 32;
 
 /// `open[x]` = 1 where the row's pixel is unmarked and has no depth (≤ 0 or NaN), else 0.
-fn open_pixels(mask_row: &[u8], depth_row: &[f32], open: &mut [u8]) {
+#[inline(always)]
+fn open_pixels_generic(mask_row: &[u8], depth_row: &[f32], open: &mut [u8]) {
     for ((o, &m), &z) in open.iter_mut().zip(mask_row).zip(depth_row) {
         *o = u8::from((m == 0) & (z.is_nan() | (z <= 0.0)));
     }
 }
+
+simd_kernel!(
+    open_pixels,
+    open_pixels_avx2,
+    open_pixels_generic,
+    (mask_row: &[u8], depth_row: &[f32], open: &mut [u8])
+);
 
 /// A run is filled when each end is a marked pixel (`Some(true)`) or the border (`None`), and
 /// at least one end is marked.
@@ -206,6 +216,25 @@ mod tests {
 
     fn fill(mask: &mut Mask, depth: &DepthMeters, max_gap_px: usize) -> Result<usize> {
         InvalidDepthGaps::new(mask.size(), max_gap_px).fill(mask, depth)
+    }
+
+    /// Every build flags the unmarked pixels without depth (≤ 0 or NaN), as a per-pixel loop.
+    #[test]
+    fn every_build_of_the_open_pixels_agrees_with_a_per_pixel_loop() {
+        let values = [0.0, -0.5, f32::NAN, 1.0, f32::INFINITY, 2.5, -0.0];
+        let depth: Vec<f32> = (0..1001).map(|i| values[i % values.len()]).collect();
+        let mask: Vec<u8> = (0..1001).map(|i| if i % 3 == 0 { MASK_SET } else { 0 }).collect();
+        let expected: Vec<u8> = mask
+            .iter()
+            .zip(&depth)
+            .map(|(&m, &z)| u8::from(m == 0 && (z.is_nan() || z <= 0.0)))
+            .collect();
+        assert!(expected.iter().filter(|&&o| o != 0).count() > 200);
+        for simd in Simd::available() {
+            let mut open = vec![9u8; depth.len()];
+            open_pixels(simd, &mask, &depth, &mut open);
+            assert_eq!(open, expected, "{simd:?}");
+        }
     }
 
     fn render(mask: &Mask) -> Vec<String> {

@@ -97,6 +97,7 @@ use crate::geometry::PinholeIntrinsics;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Mask};
 use crate::occlusion::bodies::BodyCompletion;
 use crate::occlusion::OcclusionDetector;
+use crate::simd::{simd_kernel, Simd};
 pub use config::{
     FailurePolicy, PoseSource, ProcessingMode, ProcessorConfig, DEFAULT_MAX_ANGULAR_SPEED_RADPS,
     DEFAULT_MAX_CONSTANT_VELOCITY_FRAMES, DEFAULT_MAX_COST_RATIO, DEFAULT_MAX_SPEED_MPS,
@@ -217,24 +218,42 @@ pub(crate) fn check_size(what: &str, found: ImageSize, expected: ImageSize) -> R
 
 /// Fraction of pixels with finite positive depth.
 pub(crate) fn valid_depth_fraction(depth_m: &DepthMeters) -> f64 {
-    let valid = depth_m
-        .as_slice()
-        .iter()
-        .filter(|d| d.is_finite() && **d > 0.0)
-        .count();
+    let valid = count_valid_depth(Simd::detect(), depth_m.as_slice());
     valid as f64 / depth_m.size().area().max(1) as f64
 }
 
+#[inline(always)]
+fn count_valid_depth_generic(depth_m: &[f32]) -> usize {
+    depth_m.iter().filter(|d| d.is_finite() && **d > 0.0).count()
+}
+
+simd_kernel!(
+    count_valid_depth,
+    count_valid_depth_avx2,
+    count_valid_depth_generic,
+    (depth_m: &[f32]) -> usize
+);
+
 /// max − min of the gray image (0 for a flat image; NaN pixels are ignored).
 fn gray_range(gray: &GrayF32) -> f32 {
-    let (lo, hi) = gray
-        .as_slice()
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &g| {
-            (lo.min(g), hi.max(g))
-        });
+    let (lo, hi) = gray_bounds(Simd::detect(), gray.as_slice());
     (hi - lo).max(0.0)
 }
+
+#[inline(always)]
+fn gray_bounds_generic(gray: &[f32]) -> (f32, f32) {
+    gray.iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &g| {
+            (lo.min(g), hi.max(g))
+        })
+}
+
+simd_kernel!(
+    gray_bounds,
+    gray_bounds_avx2,
+    gray_bounds_generic,
+    (gray: &[f32]) -> (f32, f32)
+);
 
 impl Processor {
     /// A processor for `size` frames seen through `intrinsics`.
@@ -618,5 +637,50 @@ impl Processor {
             accumulation_m,
             stats,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every build of the frame checks' two scans against a per-pixel loop, over invalid depths
+    /// (NaN, ±∞, 0, negative) and NaN gray, on a length that is no multiple of a vector.
+    #[test]
+    fn every_build_of_the_frame_scans_agrees_with_a_per_pixel_loop() {
+        let depth_m: Vec<f32> = (0..1001)
+            .map(|i| match i % 7 {
+                0 => f32::NAN,
+                1 => -1.0,
+                2 => 0.0,
+                3 => f32::INFINITY,
+                k => k as f32 * 0.5,
+            })
+            .collect();
+        let gray: Vec<f32> = (0..1001)
+            .map(|i| {
+                if i % 11 == 0 {
+                    f32::NAN
+                } else {
+                    ((i * 37) % 101) as f32 / 100.0 + 0.005
+                }
+            })
+            .collect();
+        let mut valid = 0;
+        for &z in &depth_m {
+            if z.is_finite() && z > 0.0 {
+                valid += 1;
+            }
+        }
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for &g in gray.iter().filter(|g| !g.is_nan()) {
+            lo = if g < lo { g } else { lo };
+            hi = if g > hi { g } else { hi };
+        }
+        assert!(valid > 400 && lo > 0.0 && hi > 0.9, "{valid} {lo} {hi}");
+        for simd in Simd::available() {
+            assert_eq!(count_valid_depth(simd, &depth_m), valid, "{simd:?}");
+            assert_eq!(gray_bounds(simd, &gray), (lo, hi), "{simd:?}");
+        }
     }
 }

@@ -116,6 +116,34 @@ fn edge_aware_depth_agrees_with_its_scalar_reference() {
     }
 }
 
+/// Every build of the depth downsampling's row kernel the CPU runs against the branching
+/// reference, bit for bit, over every block of invalid, near and far children (one block per
+/// output pixel).
+#[test]
+fn every_build_of_the_depth_row_agrees_with_the_reference() {
+    let values = [0.0, -1.0, f32::NAN, f32::INFINITY, 1.0, 1.01, 1.03, 1.5, 3.0, 0.3];
+    let mut blocks: Vec<[f32; 4]> = Vec::new();
+    for a in values {
+        for b in values {
+            for c in values {
+                blocks.extend(values.map(|d| [a, b, c, d]));
+            }
+        }
+    }
+    let top: Vec<f32> = blocks.iter().flat_map(|c| [c[0], c[1]]).collect();
+    let bottom: Vec<f32> = blocks.iter().flat_map(|c| [c[2], c[3]]).collect();
+    let expected: Vec<u32> = blocks
+        .iter()
+        .map(|&c| edge_aware_depth_reference(c).to_bits())
+        .collect();
+    for simd in Simd::available() {
+        let mut out = vec![7.0f32; blocks.len()];
+        downsample_depth_row(simd, &top, &bottom, &mut out);
+        let found: Vec<u32> = out.iter().map(|v| v.to_bits()).collect();
+        assert_eq!(found, expected, "{simd:?}");
+    }
+}
+
 /// The depth derivative by its definition, branching: the central difference when both
 /// neighbours lie on the centre's surface, the one-sided difference when one does, NaN when
 /// neither does; bit for bit over invalid, near, edge and far neighbours.

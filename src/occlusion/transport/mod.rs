@@ -506,7 +506,8 @@ simd_kernel!(
         sampled: &mut [f32],
         carried_a: &mut [f32],
         carried_p: &mut [u8]
-    )
+    ),
+    widest = Avx2
 );
 
 /// Gathers the previous slow-change evidence at the warp sources of one block (an invalid source
@@ -525,7 +526,8 @@ simd_kernel!(
     gather_slow_block,
     gather_slow_block_avx2,
     gather_slow_block_generic,
-    (sources: &[u32], previous_w: &[f32], carried_w: &mut [f32])
+    (sources: &[u32], previous_w: &[f32], carried_w: &mut [f32]),
+    widest = Avx2
 );
 
 /// ΔZ of the geometric warp on one block (W's own warp): the previous compensated depth at the
@@ -742,8 +744,8 @@ simd_kernel!(
     ) -> (u32, u32)
 );
 
-/// [`object_mask_block_generic`] in the given build (`Simd::Avx2` only when [`Simd::detect`]
-/// says so; anything else runs the baseline build).
+/// [`object_mask_block_generic`] in the given build, or in the widest the CPU runs
+/// ([`Simd::detect`]) where that is narrower.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn object_mask_block_with(
     simd: Simd,
@@ -755,11 +757,7 @@ pub(super) fn object_mask_block_with(
     mask: &mut [u8],
     predicted: &mut [u8],
 ) -> (u32, u32) {
-    let simd = if simd == Simd::Avx2 {
-        Simd::detect()
-    } else {
-        Simd::Baseline
-    };
+    let simd = simd.min(Simd::detect());
     object_mask_block(
         simd,
         parameters,

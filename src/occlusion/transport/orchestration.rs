@@ -124,19 +124,15 @@ pub fn transport(
     transport_with(Simd::detect(), inputs, scratch, outputs)
 }
 
-/// [`transport`] with an explicit kernel build (`Simd::Avx2` requires a CPU with AVX2 + FMA:
-/// pass [`Simd::detect`]'s answer or `Simd::Baseline`).
+/// [`transport`] with an explicit kernel build (a build the CPU lacks runs as the widest it has,
+/// [`Simd::detect`]).
 pub fn transport_with(
     simd: Simd,
     inputs: &TransportInputs<'_>,
     scratch: &mut TransportScratch,
     outputs: TransportOutputs<'_>,
 ) -> TransportCounts {
-    let simd = if simd == Simd::Avx2 {
-        Simd::detect()
-    } else {
-        Simd::Baseline
-    };
+    let simd = simd.min(Simd::detect());
     let width = inputs.depth_m.width();
     let height = inputs.depth_m.height();
     let area = width * height;
