@@ -95,7 +95,7 @@ pub mod pyramid;
 pub mod registration;
 pub mod scenario_eval;
 pub(crate) mod serde_util;
-pub(crate) mod simd;
+pub mod simd;
 pub mod synthetic;
 pub mod time;
 pub mod trajectory;

@@ -4,6 +4,17 @@
 //! and mixed-width instructions. No kernel calls `mul_add` (and Rust never fuses a multiply and
 //! an add by itself), so all builds compute bit-identical results; each kernel's tests compare
 //! it with a per-pixel reference.
+//!
+//! `OCCMASK_SIMD` (`baseline`, `avx2` or `avx512`) caps the build that runs, to compare builds
+//! or to rule one out; `.ci/run` runs the unit tests under each cap, so every build of every
+//! kernel is tested on the CI machine.
+
+use std::sync::OnceLock;
+
+use crate::error::{Error, Result};
+
+/// The environment variable that caps the kernels' build ([`Simd::detect`]).
+pub const SIMD_ENV_VAR: &str = "OCCMASK_SIMD";
 
 /// Which build of a kernel runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -22,12 +33,26 @@ impl Simd {
 
     /// Every build this CPU runs, narrowest first (what a kernel's tests compare).
     pub fn available() -> impl Iterator<Item = Self> {
-        let widest = Self::detect();
+        let widest = Self::cpu();
         Self::ALL.into_iter().filter(move |&simd| simd <= widest)
     }
 
-    /// The widest build this CPU runs.
+    /// The build that runs: the widest this CPU has ([`Simd::cpu`]), capped by
+    /// [`SIMD_ENV_VAR`] when that names a build (the command line rejects any other value:
+    /// [`Simd::cap_from_env`]). Read once per process.
     pub fn detect() -> Self {
+        static CHOSEN: OnceLock<Simd> = OnceLock::new();
+        *CHOSEN.get_or_init(|| {
+            let cpu = Self::cpu();
+            Self::cap_from_env()
+                .ok()
+                .flatten()
+                .map_or(cpu, |cap| cpu.min(cap))
+        })
+    }
+
+    /// The widest build this CPU runs.
+    pub fn cpu() -> Self {
         #[cfg(target_arch = "x86_64")]
         {
             use std::is_x86_feature_detected as has;
@@ -40,6 +65,38 @@ impl Simd {
             }
         }
         Self::Baseline
+    }
+
+    /// The build's name, as [`SIMD_ENV_VAR`] takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Baseline => "baseline",
+            Self::Avx2 => "avx2",
+            Self::Avx512 => "avx512",
+        }
+    }
+
+    /// The cap [`SIMD_ENV_VAR`] sets (`None` when unset or empty).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] when it is set to anything but a build's name.
+    pub fn cap_from_env() -> Result<Option<Self>> {
+        let Some(value) = std::env::var_os(SIMD_ENV_VAR) else {
+            return Ok(None);
+        };
+        let value = value.to_string_lossy();
+        if value.is_empty() {
+            return Ok(None);
+        }
+        Self::ALL
+            .into_iter()
+            .find(|simd| simd.name().eq_ignore_ascii_case(&value))
+            .map(Some)
+            .ok_or_else(|| Error::InvalidParameter {
+                name: SIMD_ENV_VAR,
+                value: value.into_owned(),
+                expected: "baseline, avx2 or avx512 (or unset: the widest build the CPU runs)".into(),
+            })
     }
 }
 
@@ -78,7 +135,8 @@ macro_rules! simd_kernel {
                 let widest = $crate::simd::Simd::Avx512;
                 $(let widest = $crate::simd::Simd::$widest;)?
                 match simd.min(widest) {
-                    // SAFETY: `Simd::Avx512` is only chosen when the CPU has these features.
+                    // SAFETY: `Simd::Avx512` is only chosen when the CPU has these features
+                    // (`Simd::detect`, `Simd::available`, or a request capped by `Simd::cpu`).
                     $crate::simd::Simd::Avx512 => return unsafe { avx512 $(::<$($g),+>)? ($($arg),*) },
                     // SAFETY: `Simd::Avx2` is only chosen when the CPU has AVX2 and FMA.
                     $crate::simd::Simd::Avx2 => return unsafe { $avx2 $(::<$($g),+>)? ($($arg),*) },

@@ -81,6 +81,8 @@ pub const EXIT_INTERRUPTED: u8 = 130;
 /// Any error, with the context needed to fix it.
 pub fn run(args: Args) -> anyhow::Result<Outcome> {
     let globals = Globals { quiet: args.quiet };
+    // A misspelt cap would otherwise run the widest build without a word.
+    occmask::simd::Simd::cap_from_env()?;
     signals::install();
     match args.command {
         Command::Convert(a) => convert::run(a, &globals),

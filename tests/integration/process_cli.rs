@@ -583,3 +583,46 @@ fn an_unregistered_recording_is_reported_and_a_registered_one_is_not() {
         "{err}"
     );
 }
+
+/// Every kernel build (`OCCMASK_SIMD` caps the one that runs; a cap above the CPU's widest runs
+/// its widest) writes the same output bytes on the TUM excerpt, whose real VGA frames run every
+/// kernel of the offline closed loop; a value that names no build is an error naming the
+/// variable and the values it takes.
+#[test]
+fn every_kernel_build_writes_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("tum.mcap");
+    let out = convert("tum", &crate::common::tum_fixture(), &input, &["--quiet"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let run = |build: &str| {
+        let output = dir.path().join(format!("out_{build}.mcap"));
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_occmask"))
+            .env("OCCMASK_SIMD", build)
+            .args([
+                "process".as_ref(),
+                input.as_os_str(),
+                "-o".as_ref(),
+                output.as_os_str(),
+                "-q".as_ref(),
+            ])
+            .output()
+            .unwrap();
+        (out, output)
+    };
+    let (out, widest) = run("");
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let widest = std::fs::read(widest).unwrap();
+    for build in ["baseline", "avx2", "avx512"] {
+        let (out, output) = run(build);
+        assert_eq!(out.status.code(), Some(0), "{build}: {}", stderr(&out));
+        assert!(std::fs::read(output).unwrap() == widest, "{build}: other bytes");
+    }
+    let (out, output) = run("sse4");
+    assert_eq!(out.status.code(), Some(1));
+    let message = stderr(&out);
+    assert!(
+        message.contains("OCCMASK_SIMD = sse4") && message.contains("baseline, avx2 or avx512"),
+        "{message}"
+    );
+    assert!(!output.exists());
+}

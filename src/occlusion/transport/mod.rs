@@ -745,7 +745,7 @@ simd_kernel!(
 );
 
 /// [`object_mask_block_generic`] in the given build, or in the widest the CPU runs
-/// ([`Simd::detect`]) where that is narrower.
+/// ([`Simd::cpu`]) where that is narrower.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn object_mask_block_with(
     simd: Simd,
@@ -757,7 +757,7 @@ pub(super) fn object_mask_block_with(
     mask: &mut [u8],
     predicted: &mut [u8],
 ) -> (u32, u32) {
-    let simd = simd.min(Simd::detect());
+    let simd = simd.min(Simd::cpu());
     object_mask_block(
         simd,
         parameters,

@@ -125,14 +125,14 @@ pub fn transport(
 }
 
 /// [`transport`] with an explicit kernel build (a build the CPU lacks runs as the widest it has,
-/// [`Simd::detect`]).
+/// [`Simd::cpu`]).
 pub fn transport_with(
     simd: Simd,
     inputs: &TransportInputs<'_>,
     scratch: &mut TransportScratch,
     outputs: TransportOutputs<'_>,
 ) -> TransportCounts {
-    let simd = simd.min(Simd::detect());
+    let simd = simd.min(Simd::cpu());
     let width = inputs.depth_m.width();
     let height = inputs.depth_m.height();
     let area = width * height;
