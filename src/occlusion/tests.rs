@@ -650,7 +650,8 @@ fn the_one_pass_motion_check_matches_two_reference_checks() {
 #[test]
 fn object_mask_builds_match_the_definition() {
     // Random A around the threshold, depths with holes, P̂ and Ñ flags: every build (each one
-    // the CPU lacks runs as its widest) gives exactly O = {A > τ_α}, P = (P̂ ∨ Ñ) ∧ O and the labels of P.
+    // the CPU lacks runs as its widest) gives exactly O = {A > τ_α}, P = (P̂ ∨ Ñ) ∧ O and the
+    // labels of P.
     let len = 1000;
     let mut rng = XorShift64::new(77);
     let mut next = || rng.below(1000) as f32 / 1000.0;
