@@ -222,7 +222,7 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         format!(
             "cannot convert {} into {}",
             common.dir.display(),
-            output.temp_path().display()
+            common.output.display()
         )
     })?;
     let file = sink

@@ -316,7 +316,8 @@ fn run_one(
     bar: &ProgressBar,
     total: &ProgressBar,
 ) -> anyhow::Result<ProcessReport> {
-    let input = McapInput::open(&job.input).with_context(|| format!("reading {}", job.input.display()))?;
+    // The failure line starts with the input's path (`error: IN:`), so no context repeats it.
+    let input = McapInput::open(&job.input)?;
     if let Some(n) = input.message_count() {
         bar.set_length(n);
     }
@@ -340,16 +341,10 @@ fn run_one(
         keep_accumulation: args.accumulation,
     });
     let (sink, report) = process_file(&input, BufWriter::new(file), config, &mut factory, &mut hooks)
-        .with_context(|| {
-            format!(
-                "processing {} into {}",
-                job.input.display(),
-                output.temp_path().display()
-            )
-        })?;
+        .with_context(|| format!("output {} not written", job.output.display()))?;
     let file = sink
         .into_inner()
-        .map_err(|e| anyhow!("cannot write {}: {}", output.temp_path().display(), e.error()))?;
+        .map_err(|e| anyhow!("output {} not written: {}", job.output.display(), e.error()))?;
     if report.frames == 0 {
         bail!(
             "{}: no colour/depth pair was processed ({} colour, {} depth messages, {} unpaired colour, \

@@ -216,6 +216,14 @@ fn check(
                 has_line(&err, "error: ", needles),
                 "{name}: expected one error line with {needles:?}: {err}"
             );
+            // A temporary output (`OUT.<pid>.tmp`) is named only when it is what could not be
+            // made (the test's own folders are `.tmpXXXXXX`).
+            assert!(
+                err.lines()
+                    .filter(|l| names_temporary_output(l))
+                    .all(|l| l.contains("cannot create temporary output file")),
+                "{name}: names a temporary file: {err}"
+            );
             assert!(left.is_empty(), "{name}: left behind {left:?}: {err}");
         }
         Expect::Warns(needles) | Expect::LosesInput(needles) => {
@@ -238,6 +246,16 @@ fn check(
         }
     }
     out
+}
+
+/// Whether `line` names a file ending in `.tmp` (not a folder `.tmpXXXXXX`).
+fn names_temporary_output(line: &str) -> bool {
+    line.match_indices(".tmp").any(|(i, m)| {
+        !line[i + m.len()..]
+            .chars()
+            .next()
+            .is_some_and(char::is_alphanumeric)
+    })
 }
 
 /// Whether one line of `text` starts with `prefix` and contains every needle.
@@ -401,7 +419,8 @@ fn process_cases() -> Vec<ProcessCase> {
             name: "depth step shorter than a row",
             bytes: || edit_raw(DEPTH_TOPIC, Some(3), |m| m.step -= 2),
             extra: &[],
-            expect: Expect::Fails(&["in.mcap", DEPTH_TOPIC, "step"]),
+            // The output that was not written, by its own name.
+            expect: Expect::Fails(&["in.mcap: output ", "out.mcap not written: ", DEPTH_TOPIC, "step"]),
         },
         ProcessCase {
             name: "8-bit depth data declared 16UC1",
