@@ -347,10 +347,9 @@ fn run_one(
         .map_err(|e| anyhow!("output {} not written: {}", job.output.display(), e.error()))?;
     if report.frames == 0 {
         bail!(
-            "{}: no colour/depth pair was processed ({} colour, {} depth messages, {} unpaired colour, \
+            "no colour/depth pair was processed ({} colour, {} depth messages, {} unpaired colour, \
              {} outside --start/--end, {} outside the pose stream); check the topics, --max-pair-gap-ms \
              and the time range",
-            job.input.display(),
             report.color_messages,
             report.depth_messages,
             report.unpaired_color,

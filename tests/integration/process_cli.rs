@@ -86,6 +86,38 @@ fn one_failing_file_does_not_stop_the_others() {
 }
 
 #[test]
+fn a_time_range_without_frames_fails_naming_the_input_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Protobuf);
+    let out_path = dir.path().join("out.mcap");
+    let out = occmask(&[
+        "process".as_ref(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        out_path.as_os_str(),
+        "--start".as_ref(),
+        "1000".as_ref(),
+        "-q".as_ref(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("no colour/depth pair was processed"))
+        .unwrap_or_else(|| panic!("no failure line: {err}"));
+    assert!(
+        line.starts_with("error: ") && line.contains("outside --start/--end"),
+        "{line}"
+    );
+    assert_eq!(line.matches("a.mcap").count(), 1, "{line}");
+    assert!(
+        files_in(dir.path()).iter().all(|f| f == "a.mcap"),
+        "{:?}",
+        files_in(dir.path())
+    );
+}
+
+#[test]
 fn refuses_overwrite_and_writing_over_an_input() {
     let dir = tempfile::tempdir().unwrap();
     let a = fixture(dir.path(), "a.mcap", Flavor::Json);
