@@ -413,7 +413,10 @@ section_bonn_crowd_200() {
   echo
   echo "In the overlays (\`reference_masks --overlay\`), the run of frames 126–129 is a person leaving"
   echo "the view at the right border, no longer masked; the runs of one frame are regions seen for"
-  echo "that frame only (at frame 60, a part of a person's region split off from it)."
+  echo "that frame only (at frame 60, a part of a person's region split off from it). The largest"
+  echo "share of the false positives is a person who walks in at the right and stands with arms"
+  echo "crossed for about a second (frames 92–124): the reference, which marks only the points that"
+  echo "other frames within 3 s see through, marks about half of that body; occmask marks all of it."
   echo
 }
 
