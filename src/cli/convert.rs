@@ -228,7 +228,7 @@ pub fn run(args: ConvertArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     let file = sink
         .into_inner()
         .map_err(|e| e.into_error())
-        .with_context(|| format!("cannot write {}", output.temp_path().display()))?;
+        .with_context(|| format!("cannot write {}", common.output.display()))?;
     output.commit(file)?;
 
     if !globals.quiet {

@@ -110,7 +110,7 @@ pub fn run(args: DemoArgs, globals: &Globals) -> anyhow::Result<Outcome> {
     )?;
     let file = sink
         .into_inner()
-        .map_err(|e| anyhow!("cannot write {}: {}", output.temp_path().display(), e.error()))?;
+        .map_err(|e| anyhow!("cannot write {}: {}", args.output.display(), e.error()))?;
     output.commit(file)?;
     drop(input);
 

@@ -95,8 +95,19 @@ fn plan(args: &ProcessArgs) -> anyhow::Result<Vec<Job>> {
                     args.inputs.len()
                 );
             }
+            let input = &args.inputs[0];
+            if occmask::mcap_io::names_folder(out) {
+                bail!(
+                    "-o/--output {} is a folder: -o takes the output file's name; pass --out-dir {} \
+                     to write {} in it{}",
+                    out.display(),
+                    out.display(),
+                    output_name(input).display(),
+                    if out.is_dir() { "" } else { " (create it first)" }
+                );
+            }
             jobs.push(Job {
-                input: args.inputs[0].clone(),
+                input: input.clone(),
                 output: out.clone(),
             });
         }
@@ -243,7 +254,7 @@ struct TrajectoryExport {
 
 impl TrajectoryExport {
     fn create(path: &Path, force: bool, inputs: &[&Path]) -> anyhow::Result<Self> {
-        let (output, file) = AtomicOutput::create(path, force, inputs)?;
+        let (output, file) = AtomicOutput::create(path, force, inputs).context("--export-trajectory")?;
         let mut export = Self {
             path: path.to_path_buf(),
             output,

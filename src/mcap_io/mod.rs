@@ -26,7 +26,7 @@ pub mod writer;
 
 pub use crate::contour::ContourOptions;
 pub use codec::ColorFormat;
-pub use output::{AtomicOutput, OutputFile};
+pub use output::{names_folder, AtomicOutput, OutputFile};
 pub use writer::{Compression, McapWriteOptions, RgbdMcapWriter};
 
 /// Colour images as the original PNG/JPEG bytes (`foxglove.CompressedImage`) or decoded `rgb8`

@@ -39,6 +39,17 @@ fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// True when `path` names a folder: an existing one, or any path ending in a separator
+/// (`out/`), which can only ever be a folder.
+pub fn names_folder(path: &Path) -> bool {
+    let ends_in_separator = path
+        .as_os_str()
+        .as_encoded_bytes()
+        .last()
+        .is_some_and(|&byte| std::path::is_separator(char::from(byte)));
+    ends_in_separator || path.is_dir()
+}
+
 fn output_error(path: &Path, message: impl Into<String>) -> Error {
     Error::InvalidParameter {
         name: "output",
@@ -51,12 +62,36 @@ impl AtomicOutput {
     /// Creates the temporary file `<final>.<pid>.tmp` in the target's directory.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] when `final_path` is a directory or is one of `inputs`;
-    /// [`Error::OutputExists`] when it exists and `force` is false; [`Error::Io`] when the temporary file cannot be created
-    /// (e.g. the directory does not exist).
+    /// [`Error::InvalidParameter`] when `final_path` names a folder ([`names_folder`]), lies in
+    /// a folder that does not exist, or is one of `inputs`; [`Error::OutputExists`] when it
+    /// exists and `force` is false; [`Error::Io`] when the temporary file cannot be created
+    /// (e.g. no permission to write in the folder).
     pub fn create(final_path: &Path, force: bool, inputs: &[&Path]) -> Result<(Self, OutputFile)> {
         if final_path.is_dir() {
             return Err(output_error(final_path, "a file path, found a directory"));
+        }
+        if names_folder(final_path) {
+            return Err(output_error(
+                final_path,
+                "a file path, found a directory name (it ends in a separator)",
+            ));
+        }
+        // Checked here, not left to the rename at the end: `out/` (no such folder) would
+        // otherwise create `out.<pid>.tmp`, do all the work, and fail only at the rename.
+        let folder = match final_path.parent() {
+            Some(parent) if !parent.as_os_str().is_empty() => parent,
+            _ => Path::new("."),
+        };
+        if !folder.is_dir() {
+            let found = if folder.exists() {
+                "is not a folder"
+            } else {
+                "does not exist"
+            };
+            return Err(output_error(
+                final_path,
+                format!("a file in an existing folder, but {} {found}", folder.display()),
+            ));
         }
         for input in inputs {
             if same_file(final_path, input) {
@@ -125,7 +160,7 @@ impl AtomicOutput {
     pub fn commit(mut self, file: OutputFile) -> Result<()> {
         let file = file
             .into_synced_file()
-            .map_err(|e| Error::io("cannot flush output file", &self.temp_path, e))?;
+            .map_err(|e| Error::io("cannot flush output file", &self.final_path, e))?;
         drop(file);
         if !self.force && self.final_path.exists() {
             return Err(Error::OutputExists {
@@ -327,6 +362,32 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("directory"), "{err}");
+    }
+
+    #[test]
+    fn refuses_a_folder_name_and_a_missing_folder_before_writing_anything() {
+        let dir = tempfile::tempdir().unwrap();
+        // `new/` does not exist: a name ending in a separator is a folder all the same (the
+        // temporary file would otherwise be `new.<pid>.tmp`, and only the rename would fail).
+        let folder_name = PathBuf::from(format!("{}/new/", dir.path().display()));
+        let err = AtomicOutput::create(&folder_name, true, &[])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("a file path, found a directory name"), "{err}");
+        let err = AtomicOutput::create(&dir.path().join("new/a.mcap"), true, &[])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("new does not exist"), "{err}");
+        let file = dir.path().join("f");
+        std::fs::write(&file, b"").unwrap();
+        let err = AtomicOutput::create(&file.join("a.mcap"), true, &[])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("f is not a folder"), "{err}");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "only f");
+        assert!(names_folder(Path::new("x/")) && !names_folder(&file));
+        // A bare file name lies in the working folder, which exists.
+        assert!(names_folder(Path::new(".")) && !names_folder(Path::new("a.mcap")));
     }
 
     #[cfg(unix)]

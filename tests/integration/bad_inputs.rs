@@ -720,7 +720,7 @@ fn process_output_and_path_problems() {
 
     // An output directory that cannot hold files: its parent is a regular file.
     let args = os(&[&"process", &input, &"-o", &input.join("o.mcap")]);
-    let e = Expect::Fails(&["in.mcap/o.mcap", "cannot create temporary output file"]);
+    let e = Expect::Fails(&["in.mcap/o.mcap", "in.mcap is not a folder"]);
     check(
         "output under a regular file",
         &args,
@@ -729,6 +729,23 @@ fn process_output_and_path_problems() {
         keep,
         &e,
     );
+
+    // An output in a folder that does not exist.
+    let args = os(&[&"process", &input, &"-o", &out_dir.join("none/o.mcap")]);
+    let e = Expect::Fails(&["none/o.mcap", "none does not exist"]);
+    check("output folder missing", &args, &[&input], &out_dir, keep, &e);
+
+    // `-o new/`: a folder's name, which -o does not take. Once the work was done and only the
+    // rename failed, so the message names the flag that writes into a folder.
+    let folder_name = format!("{}/", out_dir.join("new").display());
+    let args = os(&[&"process", &input, &"-o", &folder_name]);
+    let e = Expect::Fails(&[
+        "new/ is a folder",
+        "--out-dir",
+        "in.occmask.mcap",
+        "create it first",
+    ]);
+    check("output is a folder's name", &args, &[&input], &out_dir, keep, &e);
 
     // A read-only output directory (permissions do not stop root, so only as a normal user).
     // SAFETY: geteuid has no preconditions.
@@ -1087,8 +1104,13 @@ fn convert_output_problems() {
     check("/dev/full as output", &args, &inputs, &out_dir, &[], &e);
 
     let args = os(&[&"convert", &"tum", &dir, &"-o", &rgb_txt.join("o.mcap")]);
-    let e = Expect::Fails(&["rgb.txt/o.mcap", "cannot create temporary output file"]);
+    let e = Expect::Fails(&["rgb.txt/o.mcap", "rgb.txt is not a folder"]);
     check("output under a regular file", &args, &inputs, &out_dir, &[], &e);
+
+    let folder_name = format!("{}/", out_dir.join("new").display());
+    let args = os(&[&"convert", &"tum", &dir, &"-o", &folder_name]);
+    let e = Expect::Fails(&["new/", "found a directory name"]);
+    check("output is a folder's name", &args, &inputs, &out_dir, &[], &e);
 
     // An existing file (here one of the inputs) is only replaced with --force.
     let args = os(&[&"convert", &"tum", &dir, &"-o", &rgb_txt]);
