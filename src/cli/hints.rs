@@ -3,7 +3,7 @@
 
 use std::borrow::Cow;
 
-use occmask::error::{PoseRole, RegistrationNeed, TopicRole};
+use occmask::error::{McapProblem, PoseRole, RegistrationNeed, TopicRole};
 use occmask::Error;
 
 /// What to pass (or check) on the command line for `error`, if a flag fixes it.
@@ -55,6 +55,10 @@ pub fn flag_hint(error: &Error) -> Option<Cow<'static, str>> {
                 "pass --depth-camera-info-topic with the calibration of these images"
             }
         },
+        Error::BadMcap {
+            path,
+            problem: McapProblem::Directory,
+        } => return Some(format!("pass the files in it ({}/*.mcap)", path.display()).into()),
         Error::MissingTransform { .. } => {
             "pass --depth-to-color X,Y,Z,QX,QY,QZ,QW (the depth camera's pose in the colour \
              camera's frame: translation in metres, then the rotation quaternion), or \

@@ -700,7 +700,12 @@ fn process_output_and_path_problems() {
     let in_dir = tmp.path().join("dir.mcap");
     std::fs::create_dir(&in_dir).unwrap();
     let args = os(&[&"process", &in_dir, &"-o", &out_dir.join("o.mcap")]);
-    let e = Expect::Fails(&["dir.mcap", "expected an MCAP file, found a directory"]);
+    let e = Expect::Fails(&[
+        "dir.mcap",
+        "expected an MCAP file, found a directory",
+        "pass the files in it (",
+        "dir.mcap/*.mcap)",
+    ]);
     check("input is a directory", &args, &[&input], &out_dir, keep, &e);
 
     // The output is a symbolic link to the input (writing over an input, even with --force).
@@ -892,7 +897,7 @@ fn eval_bad_inputs() {
         (
             "directory",
             &folder,
-            Expect::Fails(&["folder.mcap", "expected an MCAP file, found a directory"]),
+            Expect::Fails(&["folder.mcap", "found a directory", "folder.mcap/*.mcap)"]),
         ),
         (
             "not processed",
