@@ -36,12 +36,20 @@ use occmask::synthetic::{
     DepthSensorModel, RgbdRig, Scenario, SequenceConfig, SyntheticSequence, KINECT_LIKE_DISTORTION,
 };
 
+const USAGE: &str = "usage: cargo run --release --example synthetic_mcap -- OUT_DIR [--rig RIG] \
+                     [--ros1|--ros2] [--frames N] [--seed N] [--sensor kinect|ideal|unquantised] \
+                     [SCENARIO...]";
+
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
-    let out_dir = std::path::PathBuf::from(
-        args.next()
-            .context("usage: OUT_DIR [--rig RIG] [--ros1] [SCENARIO...]")?,
-    );
+    let out_dir = match args.next() {
+        Some(arg) if arg == "-h" || arg == "--help" => {
+            println!("{USAGE}");
+            return Ok(());
+        }
+        Some(arg) if !arg.starts_with('-') => std::path::PathBuf::from(arg),
+        _ => bail!("{USAGE}"),
+    };
     let (mut rig_name, mut version, mut frames, mut wanted) = (None, RosVersion::Ros2, None, Vec::new());
     let mut sensor = DepthSensorModel::default();
     let mut seed = SequenceConfig::default().seed;
@@ -68,7 +76,14 @@ fn main() -> anyhow::Result<()> {
                     other => bail!("--sensor kinect|ideal|unquantised, found {other:?}"),
                 }
             }
-            _ => wanted.push(arg),
+            flag if flag.starts_with('-') => bail!("unknown option {flag:?}; {USAGE}"),
+            name => {
+                if !Scenario::EVERY.iter().any(|s| s.name() == name) {
+                    let names: Vec<&str> = Scenario::EVERY.iter().map(|s| s.name()).collect();
+                    bail!("unknown scenario {name:?}: one of {}", names.join(", "));
+                }
+                wanted.push(arg)
+            }
         }
     }
     std::fs::create_dir_all(&out_dir)?;
