@@ -96,26 +96,47 @@ pub(super) fn report_warnings(input: &Path, rep: &ProcessReport) -> Vec<String> 
     out
 }
 
+/// The narrowest the file-name column of the summary tables gets.
+const MIN_NAME_COLUMN: usize = 32;
+
+/// `path`'s file name, as the summary tables print it.
+fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The width of the file-name column: the longest name, so that long names keep the columns
+/// aligned.
+fn name_column(results: &[JobResult]) -> usize {
+    results
+        .iter()
+        .map(|r| file_name(&r.input).chars().count())
+        .fold(MIN_NAME_COLUMN, usize::max)
+}
+
 /// `--timings`: where each file's frame loop spent its time (the pipeline should dominate).
 pub(super) fn print_timings(results: &[JobResult]) {
+    let w = name_column(results);
     let mut out = std::io::stderr().lock();
     let _ = writeln!(
         out,
-        "{:<32} {:>7} {:>9} {:>8} {:>11} {:>12} {:>12}",
+        "{:<w$} {:>7} {:>9} {:>8} {:>11} {:>12} {:>12}",
         "frame loop (s)", "loop", "pipeline", "rectify", "input wait", "output wait", "writer tail"
     );
     for r in results {
         if let FileOutcome::Done(rep, _) = &r.outcome {
             let t = &rep.timings;
-            let name = r
-                .input
-                .file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
             let _ = writeln!(
                 out,
-                "{name:<32} {:>7.3} {:>9.3} {:>8.3} {:>11.3} {:>12.3} {:>12.3}",
-                t.loop_s, t.pipeline_s, t.rectify_s, t.input_wait_s, t.output_wait_s, t.writer_tail_s
+                "{:<w$} {:>7.3} {:>9.3} {:>8.3} {:>11.3} {:>12.3} {:>12.3}",
+                file_name(&r.input),
+                t.loop_s,
+                t.pipeline_s,
+                t.rectify_s,
+                t.input_wait_s,
+                t.output_wait_s,
+                t.writer_tail_s
             );
         }
     }
@@ -131,64 +152,91 @@ pub(super) fn print_summary(results: &[JobResult], jobs: &[Job], budget: &Thread
         budget.threads_per_file_text(),
         available_cores()
     );
-    let _ = writeln!(
-        out,
-        "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7} {:>7}  output",
+    let _ = write!(out, "{}", summary_table(results, jobs));
+}
+
+/// One row per file (frames, unpaired messages, time, output), then what was done to each
+/// file's images.
+fn summary_table(results: &[JobResult], jobs: &[Job]) -> String {
+    use std::fmt::Write as _;
+    let w = name_column(results);
+    let mut out = format!(
+        "{:<w$} {:>7} {:>9} {:>9} {:>8} {:>7} {:>7}  output\n",
         "input", "frames", "unp.col", "unp.dep", "no pose", "s", "fps"
     );
     for r in results {
-        let name = r
-            .input
-            .file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let name = file_name(&r.input);
         let output = jobs
             .iter()
             .find(|j| j.input == r.input)
             .map(|j| j.output.display().to_string())
             .unwrap_or_default();
-        match &r.outcome {
-            FileOutcome::Done(rep, secs) => {
-                let _ = writeln!(
-                    out,
-                    "{:<32} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}{}",
-                    name,
-                    rep.frames,
-                    rep.unpaired_color,
-                    rep.unpaired_depth,
-                    rep.outside_pose_stream,
-                    secs,
-                    rep.frames as f64 / secs.max(1e-9),
-                    match &rep.input_truncation {
-                        Some(t) if t.messages_intact => "  (input truncated, no message lost)".to_owned(),
-                        Some(t) => format!("  (input truncated: last {} bytes lost)", t.lost_bytes),
-                        None => String::new(),
-                    }
-                );
-            }
-            FileOutcome::Kept => {
-                let _ = writeln!(
-                    out,
-                    "{name:<32} kept: {output} exists, a finished run of it with these parameters"
-                );
-            }
-            FileOutcome::Failed(_) => {
-                let _ = writeln!(out, "{name:<32} FAILED (see below)");
-            }
-        }
+        let _ = match &r.outcome {
+            FileOutcome::Done(rep, secs) => writeln!(
+                out,
+                "{name:<w$} {:>7} {:>9} {:>9} {:>8} {:>7.1} {:>7.1}  {output}{}",
+                rep.frames,
+                rep.unpaired_color,
+                rep.unpaired_depth,
+                rep.outside_pose_stream,
+                secs,
+                rep.frames as f64 / secs.max(1e-9),
+                match &rep.input_truncation {
+                    Some(t) if t.messages_intact => "  (input truncated, no message lost)".to_owned(),
+                    Some(t) => format!("  (input truncated: last {} bytes lost)", t.lost_bytes),
+                    None => String::new(),
+                }
+            ),
+            FileOutcome::Kept => writeln!(
+                out,
+                "{name:<w$} kept: {output} exists, a finished run of it with these parameters"
+            ),
+            FileOutcome::Failed(_) => writeln!(out, "{name:<w$} FAILED (see below)"),
+        };
     }
     // What was done to the images: registration and undistortion change what the pipeline
     // saw, so they are never silent.
     for r in results {
         if let FileOutcome::Done(rep, _) = &r.outcome {
             if !rep.geometry.is_identity() {
-                let name = r
-                    .input
-                    .file_name()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_default();
-                let _ = writeln!(out, "{name}: {}", rep.geometry.describe());
+                let _ = writeln!(out, "{}: {}", file_name(&r.input), rep.geometry.describe());
             }
         }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_long_file_name_widens_the_name_column_instead_of_shifting_its_row() {
+        let long = "a_recording_name_longer_than_thirty_two_characters.mcap";
+        let results: Vec<JobResult> = [
+            ("short.mcap", FileOutcome::Kept),
+            (long, FileOutcome::Failed(String::new())),
+        ]
+        .into_iter()
+        .map(|(name, outcome)| JobResult {
+            input: PathBuf::from("in").join(name),
+            outcome,
+        })
+        .collect();
+        let table = summary_table(&results, &[]);
+        let lines: Vec<&str> = table.lines().collect();
+        assert_eq!(lines.len(), 3, "{table}");
+        // The header's right-aligned "frames" and every row's second column start one space
+        // after the longest name.
+        assert_eq!(lines[0].find("frames"), Some(long.len() + 2), "{table}");
+        for line in &lines[1..] {
+            assert_eq!(line.as_bytes()[long.len()], b' ', "{table}");
+            assert_ne!(line.as_bytes()[long.len() + 1], b' ', "{table}");
+        }
+        assert!(
+            lines[1].starts_with("short.mcap ") && lines[2].starts_with(long),
+            "{table}"
+        );
+        assert_eq!(name_column(&results[..1]), MIN_NAME_COLUMN);
     }
 }
