@@ -20,10 +20,7 @@ fn main() -> ExitCode {
         Ok(outcome) => ExitCode::from(outcome.exit_code()),
         Err(err) => {
             eprintln!("error: {err:#}");
-            let interrupted = err
-                .chain()
-                .any(|e| matches!(e.downcast_ref(), Some(occmask::Error::Interrupted { .. })));
-            ExitCode::from(if interrupted {
+            ExitCode::from(if cli::interrupted(&err) {
                 cli::EXIT_INTERRUPTED
             } else {
                 cli::EXIT_ERROR

@@ -68,6 +68,26 @@ impl Outcome {
     }
 }
 
+/// A batch stopped by SIGINT or SIGTERM, with what it finished: exits with
+/// [`EXIT_INTERRUPTED`] like a single file's `occmask::Error::Interrupted`.
+#[derive(Debug, thiserror::Error)]
+#[error("stopped by a signal: {finished} of {total} files were finished and kept{resume}")]
+pub struct StoppedBySignal {
+    /// Files written and kept.
+    pub finished: usize,
+    /// Files in the batch.
+    pub total: usize,
+    /// How to go on, if some are left ("; run …").
+    pub resume: &'static str,
+}
+
+/// True when `error` (anywhere in its chain) says the run was stopped by a signal.
+pub fn interrupted(error: &anyhow::Error) -> bool {
+    error.chain().any(|e| {
+        e.is::<StoppedBySignal>() || matches!(e.downcast_ref(), Some(occmask::Error::Interrupted { .. }))
+    })
+}
+
 /// Exit code for errors.
 pub const EXIT_ERROR: u8 = 1;
 /// Exit code for command-line usage errors (clap's convention).

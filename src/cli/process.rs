@@ -502,22 +502,20 @@ pub fn run(args: ProcessArgs, globals: &Globals) -> anyhow::Result<Outcome> {
         }
     }
     if super::signals::interrupted() {
-        // Exit code 130 (main looks for Error::Interrupted): files finished before the signal
-        // are complete; the unfinished ones removed their temporary output.
-        let done = results.len() - failed;
-        let resume = if results.len() > 1 && done < results.len() {
+        // Exit code 130: files finished before the signal are complete; the unfinished ones
+        // removed their temporary output.
+        let finished = results.len() - failed;
+        let resume = if results.len() > 1 && finished < results.len() {
             "; run the same command with --skip-existing to process the others"
         } else {
             ""
         };
-        return Err(anyhow::Error::new(occmask::Error::Interrupted {
-            done,
+        return Err(super::StoppedBySignal {
+            finished,
             total: results.len(),
-        }))
-        .context(format!(
-            "stopped by a signal: {done} of {} files were finished and kept{resume}",
-            results.len()
-        ));
+            resume,
+        }
+        .into());
     }
     if failed > 0 {
         bail!("{failed} of {} files failed", results.len());

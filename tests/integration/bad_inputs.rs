@@ -1356,11 +1356,17 @@ fn an_interrupted_batch_resumes_with_skip_existing() {
         names.iter().any(|n| n == "desk.occmask.mcap")
     });
     assert_interrupted("batch SIGINT", &out, &work, &["desk.occmask.mcap"]);
+    let err = stderr(&out);
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("error: stopped by a signal: "))
+        .unwrap_or_else(|| panic!("no batch line: {err}"));
     assert!(
-        stderr(&out)
-            .contains("1 of 2 files were finished and kept; run the same command with --skip-existing"),
-        "{}",
-        stderr(&out)
+        line.ends_with(
+            "1 of 2 files were finished and kept; run the same command with --skip-existing to \
+             process the others"
+        ),
+        "{err}"
     );
     let first = work.join("desk.occmask.mcap");
     let kept = std::fs::metadata(&first).unwrap();
