@@ -336,6 +336,18 @@ pub enum Error {
         error: Box<Error>,
     },
 
+    /// The input holds the channels of an earlier `occmask process` run, which a new run's
+    /// would mix with.
+    #[error(
+        "the input holds the channels of an earlier occmask run ({}): this run's masks and poses would be \
+         mixed into them",
+        topics.join(", ")
+    )]
+    AlreadyAnnotated {
+        /// The earlier run's topics.
+        topics: Vec<String>,
+    },
+
     /// The output exists and may not be overwritten.
     #[error("output file {} exists{}", path.display(), if *appeared_while_writing { " (it appeared while writing)" } else { "" })]
     OutputExists {

@@ -41,6 +41,10 @@ pub fn flag_hint(error: &Error) -> Option<Cow<'static, str>> {
             ..
         } => "check --groundtruth-topic and --groundtruth",
         Error::AnchorPoses { .. } => "pass --no-anchor to ignore the channel",
+        Error::AlreadyAnnotated { .. } => {
+            "process the recording it was made from, or pass --replace-annotations to write this \
+             run's channels in place of the earlier run's"
+        }
         Error::OutputExists { .. } => "pass --force to overwrite it",
         Error::ExistingOutputNotReusable { .. } => "pass --force to replace it",
         Error::DepthNotRegistered { needed, .. } => match needed.as_ref() {

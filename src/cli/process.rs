@@ -228,6 +228,7 @@ fn config(args: &ProcessArgs) -> anyhow::Result<ProcessConfig> {
             accumulation: args.accumulation,
             points_stride_px: args.points.then_some(args.point_stride),
             write: args.write.options(),
+            replace_earlier: args.replace_annotations,
             ..Default::default()
         },
         processor,

@@ -74,6 +74,8 @@ pub const TOPIC_STATS: &str = "/occmask/stats";
 /// Transform topic used instead of `/tf` when the input's `/tf` has another schema (e.g. ROS 2
 /// `tf2_msgs/msg/TFMessage`), so one topic never carries two schemas.
 pub const TOPIC_TF_FALLBACK: &str = "/occmask/tf";
+/// The prefix of every topic occmask writes, but the transforms on `/tf`.
+pub const TOPIC_PREFIX: &str = "/occmask/";
 /// The estimated camera frame (child of [`FRAME_WORLD`]).
 pub const FRAME_CAMERA_ESTIMATED: &str = "camera_estimated";
 /// Schema name of the stats messages.
@@ -129,6 +131,11 @@ pub struct AnnotateOptions {
     pub write: McapWriteOptions,
     /// Outline extraction.
     pub contours: ContourOptions,
+    /// When copying an input that an earlier run annotated ([`earlier_annotation_topics`]),
+    /// leave out that run's channels, its [`FRAME_WORLD`] → [`FRAME_CAMERA_ESTIMATED`]
+    /// transforms on `/tf` and its [`METADATA_PROCESS`] records, so that this run's take their
+    /// place instead of mixing with them on the same channels.
+    pub replace_earlier: bool,
 }
 
 impl Default for AnnotateOptions {
@@ -139,6 +146,7 @@ impl Default for AnnotateOptions {
             points_stride_px: None,
             write: McapWriteOptions::default(),
             contours: ContourOptions::default(),
+            replace_earlier: false,
         }
     }
 }
@@ -235,6 +243,11 @@ pub struct AnnotatedWriter<W: Write + Seek> {
     latest_log_time_ns: u64,
     copied_messages: u64,
     new_messages: u64,
+    /// The input channels of an earlier run, left out ([`AnnotateOptions::replace_earlier`]).
+    replaced_channels: Vec<u16>,
+    /// The input's `/tf` channel, whose earlier-run transforms are left out.
+    replaced_tf_channel: Option<u16>,
+    replaced_messages: u64,
     scratch: Vec<u8>,
     /// Metadata and attachments written by [`Self::finish`], after the last message (see the
     /// module documentation for why not earlier).
@@ -313,6 +326,27 @@ impl PathTrail {
     }
 }
 
+/// The topics of `input`'s channels that an earlier `occmask process` run wrote (those under
+/// [`TOPIC_PREFIX`]), sorted: a new run's channels would share them.
+pub fn earlier_annotation_topics(input: &McapInput) -> Vec<String> {
+    let mut topics: Vec<String> = input
+        .channels()
+        .values()
+        .filter(|c| c.topic.starts_with(TOPIC_PREFIX))
+        .map(|c| c.topic.clone())
+        .collect();
+    topics.sort_unstable();
+    topics.dedup();
+    topics
+}
+
+/// True for a protobuf `foxglove.FrameTransform` that an occmask run wrote.
+fn is_estimated_camera_transform(data: &[u8]) -> bool {
+    use prost::Message as _;
+    foxglove::messages::FrameTransform::decode(data)
+        .is_ok_and(|t| t.parent_frame_id == FRAME_WORLD && t.child_frame_id == FRAME_CAMERA_ESTIMATED)
+}
+
 /// The transform topic to write for `input`: `/tf` unless the input has a `/tf` channel with
 /// another schema than protobuf `foxglove.FrameTransform`.
 pub fn tf_topic_for(input: &McapInput) -> &'static str {
@@ -345,14 +379,29 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
         let profile = if options.copy_input { input.profile() } else { "" };
         let mut writer = options.write.mcap_options().profile(profile).create(sink)?;
         let mut deferred = Vec::new();
+        let (mut replaced_channels, mut replaced_tf_channel) = (Vec::new(), None);
         if options.copy_input {
             for s in input.schemas().values() {
                 writer.add_schema_with_id(s.id, &s.name, &s.encoding, &s.data)?;
             }
             for c in input.channels().values() {
+                if options.replace_earlier && c.topic.starts_with(TOPIC_PREFIX) {
+                    replaced_channels.push(c.id);
+                    continue;
+                }
+                if options.replace_earlier
+                    && c.topic == TOPIC_TF
+                    && c.schema_name == SCHEMA_FRAME_TRANSFORM
+                    && c.message_encoding == ENCODING_PROTOBUF
+                {
+                    replaced_tf_channel = Some(c.id);
+                }
                 writer.add_channel_with_id(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
             }
             deferred = input.extras()?;
+            if options.replace_earlier {
+                deferred.retain(|r| !matches!(r, ExtraRecord::Metadata(m) if m.name == METADATA_PROCESS));
+            }
         }
         let mut add = |topic: &str, schema: foxglove::Schema| -> Result<u16> {
             let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
@@ -402,16 +451,27 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
             latest_log_time_ns: 0,
             copied_messages: 0,
             new_messages: 0,
+            replaced_channels,
+            replaced_tf_channel,
+            replaced_messages: 0,
             scratch: Vec::new(),
             deferred,
         })
     }
 
-    /// Copies an input message unchanged (header and bytes).
+    /// Copies an input message unchanged (header and bytes), unless it is an earlier run's
+    /// ([`AnnotateOptions::replace_earlier`]).
     ///
     /// # Errors
     /// [`Error::Mcap`] on write failure or an unknown channel (sidecar mode).
     pub fn copy_message(&mut self, header: &MessageHeader, data: &[u8]) -> Result<()> {
+        let channel = header.channel_id;
+        if self.replaced_channels.contains(&channel)
+            || (self.replaced_tf_channel == Some(channel) && is_estimated_camera_transform(data))
+        {
+            self.replaced_messages += 1;
+            return Ok(());
+        }
         self.writer.write_to_known_channel(header, data)?;
         self.latest_log_time_ns = self.latest_log_time_ns.max(header.log_time);
         self.copied_messages += 1;
@@ -582,6 +642,11 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
     /// Input messages copied so far.
     pub fn copied_messages(&self) -> u64 {
         self.copied_messages
+    }
+
+    /// Input messages of an earlier run left out so far ([`AnnotateOptions::replace_earlier`]).
+    pub fn replaced_messages(&self) -> u64 {
+        self.replaced_messages
     }
 
     /// New messages written so far.

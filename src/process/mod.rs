@@ -36,7 +36,8 @@ use crate::error::{CalibrationGap, Error, Result};
 use crate::geometry::distortion::CameraModel;
 use crate::image_buf::{DepthMeters, GrayF32, ImageSize, Rgb8};
 use crate::mcap_io::annotate::{
-    AnnotatedWriter, METADATA_ODOMETRY_ANCHOR, METADATA_PROCESS, METADATA_PROCESSOR_CONFIG,
+    earlier_annotation_topics, AnnotatedWriter, METADATA_ODOMETRY_ANCHOR, METADATA_PROCESS,
+    METADATA_PROCESSOR_CONFIG,
 };
 use crate::mcap_io::input::decode::{unsupported_schema, IMAGE_SCHEMA};
 use crate::mcap_io::input::detect::detect_topics;
@@ -98,6 +99,10 @@ pub fn process_file<W: Write + Seek + Send>(
     make_processor: &mut ProcessorFactory<'_>,
     hooks: &mut dyn ProcessHooks,
 ) -> Result<(W, ProcessReport)> {
+    let earlier = earlier_annotation_topics(input);
+    if !earlier.is_empty() && !config.annotate.replace_earlier {
+        return Err(Error::AlreadyAnnotated { topics: earlier });
+    }
     let topics = detect_topics(input, &topic_overrides(config))?;
 
     // Calibration: the flag, else the first message of the calibration channel.
@@ -258,6 +263,7 @@ pub fn process_file<W: Write + Seek + Send>(
             outside_time_range: 0,
             outside_pose_stream: 0,
             copied_messages: 0,
+            replaced_messages: 0,
             new_messages: 0,
             input_truncated: input.is_truncated(),
             input_truncation: input.truncation().copied(),
@@ -391,6 +397,7 @@ pub fn process_file<W: Write + Seek + Send>(
     state.report.timings.writer_tail_s = writer_tail_s;
     state.report.anchor_unreadable = state.anchor.and_then(|a| a.unreadable);
     state.report.copied_messages = writer.copied_messages();
+    state.report.replaced_messages = writer.replaced_messages();
     state.report.new_messages = writer.new_messages();
     let sink = writer.finish()?;
     Ok((sink, state.report))

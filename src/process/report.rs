@@ -38,6 +38,9 @@ pub struct ProcessReport {
     pub outside_pose_stream: u64,
     /// Input messages copied.
     pub copied_messages: u64,
+    /// Input messages of an earlier run left out, its channels replaced by this run's
+    /// ([`crate::mcap_io::annotate::AnnotateOptions::replace_earlier`]).
+    pub replaced_messages: u64,
     /// New messages written.
     pub new_messages: u64,
     /// The input ended early (unfinished recording); everything readable was used.

@@ -118,6 +118,64 @@ fn a_time_range_without_frames_fails_naming_the_input_once() {
 }
 
 #[test]
+fn an_annotated_input_needs_replace_annotations_and_then_gets_one_run_of_each_channel() {
+    use crate::common::recording::{messages, metadata, open};
+    use std::collections::BTreeMap;
+    let dir = tempfile::tempdir().unwrap();
+    let desk = converted_tum_fixture(dir.path());
+    let first = dir.path().join("first.mcap");
+    let out = crate::common::process(&desk, &first, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+
+    // Processing the annotated file again would mix two runs on the same channels.
+    let second = dir.path().join("second.mcap");
+    let out = crate::common::process(&first, &second, &[]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("earlier occmask run (/occmask/anchor_path, /occmask/mask, /occmask/mask_annotations,")
+            && err.contains("--replace-annotations"),
+        "{err}"
+    );
+    assert_eq!(files_in(dir.path()), vec!["desk.mcap", "first.mcap"]);
+
+    let out = occmask(&[
+        "process".as_ref(),
+        first.as_os_str(),
+        "-o".as_ref(),
+        second.as_os_str(),
+        "--replace-annotations".as_ref(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(err.contains("first.mcap: the earlier run's "), "{err}");
+    // The same input images and parameters: the second run writes what the first did, once.
+    let by_topic = |path: &Path| {
+        let mut topics: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();
+        for m in messages(&open(path)) {
+            topics.entry(m.topic).or_default().push(m.data);
+        }
+        topics
+    };
+    let (once, again) = (by_topic(&first), by_topic(&second));
+    assert!(once.contains_key("/tf") && once.contains_key("/occmask/mask"));
+    assert_eq!(once.keys().collect::<Vec<_>>(), again.keys().collect::<Vec<_>>());
+    for (topic, data) in &once {
+        assert!(
+            again[topic] == *data,
+            "{topic}: {} against {} messages",
+            again[topic].len(),
+            data.len()
+        );
+    }
+    let runs = metadata(&open(&second))
+        .iter()
+        .filter(|m| m.name == occmask::mcap_io::annotate::METADATA_PROCESS)
+        .count();
+    assert_eq!(runs, 1);
+}
+
+#[test]
 fn refuses_overwrite_and_writing_over_an_input() {
     let dir = tempfile::tempdir().unwrap();
     let a = fixture(dir.path(), "a.mcap", Flavor::Json);

@@ -172,6 +172,13 @@ pub struct ProcessArgs {
     #[arg(long)]
     pub sidecar: bool,
 
+    /// Process an input that an earlier run annotated (it has /occmask/ channels): leave out
+    /// that run's channels, its world -> camera_estimated transforms on /tf and its
+    /// occmask.process metadata, so this run's take their place (without it, such an input
+    /// fails: the two runs would mix on the same channels).
+    #[arg(long)]
+    pub replace_annotations: bool,
+
     /// Also write the accumulation map as /occmask/accumulation (32FC1, for debugging).
     #[arg(long)]
     pub accumulation: bool,

@@ -194,12 +194,21 @@ fn summary_table(results: &[JobResult], jobs: &[Job]) -> String {
             FileOutcome::Failed(_) => writeln!(out, "{name:<w$} FAILED (see below)"),
         };
     }
-    // What was done to the images: registration and undistortion change what the pipeline
-    // saw, so they are never silent.
+    // What was done to the images (registration and undistortion change what the pipeline
+    // saw) and to an earlier run's messages is never silent.
     for r in results {
         if let FileOutcome::Done(rep, _) = &r.outcome {
             if !rep.geometry.is_identity() {
                 let _ = writeln!(out, "{}: {}", file_name(&r.input), rep.geometry.describe());
+            }
+            if rep.replaced_messages > 0 {
+                let _ = writeln!(
+                    out,
+                    "{}: the earlier run's {} messages left out, this run's channels in their place \
+                     (--replace-annotations)",
+                    file_name(&r.input),
+                    rep.replaced_messages
+                );
             }
         }
     }
