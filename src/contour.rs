@@ -14,7 +14,7 @@ use crate::image_buf::{Mask, MASK_SET};
 /// A closed polygon in pixel-corner coordinates (the last vertex connects to the first).
 pub type Polygon = Vec<[f64; 2]>;
 
-/// Options of [`outer_contours`].
+/// Options of `outer_contours`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContourOptions {
     /// Regions with a smaller enclosed area (pixels) are dropped as noise.

@@ -15,7 +15,7 @@
 //! [`ProcessorConfig`]: pose source, [`DvoTracker`] and [`OcclusionDetector`] parameters) for
 //! frames you already have in memory (see [`pipeline`]); [`process_file`] for an RGB-D MCAP
 //! file read through [`McapInput`]; [`convert_sequence`] for a dataset folder read by
-//! [`dataset::tum::load`] or [`dataset::larr::load`]; [`evaluate`] to score an annotated file.
+//! [`dataset::tum::load`] or [`dataset::larr::load`]; [`evaluate()`] to score an annotated file.
 //! A whole round trip on a tiny synthetic recording:
 //!
 //! ```
@@ -52,7 +52,7 @@
 //!
 //! Each entry type has its own example: [`Processor`] in [`pipeline`], [`DvoTracker`] in
 //! [`dvo`], [`convert_sequence`] (with [`McapInput::from_bytes`]) on its page, the dataset
-//! readers on [`dataset::tum::load`] and [`dataset::larr::load`], [`evaluate`] on its page.
+//! readers on [`dataset::tum::load`] and [`dataset::larr::load`], [`evaluate()`] on its page.
 //! [`OcclusionDetector`] alone, fed ground-truth motion:
 //!
 //! ```

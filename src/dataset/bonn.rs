@@ -5,7 +5,7 @@
 //! The code published with the dataset converts a ground-truth pose T_gt into the camera's as
 //! T_ros · T_gt · T_ros · T_m, with T_ros a fixed change of axes and T_m a rotation times 1.0593
 //! plus a lever arm of about 2 cm. As a rigid transform that is `world_from_marker ·
-//! marker_from_camera` ([`MARKER_FROM_CAMERA`], the rotation part of T_ros · T_m) with every
+//! marker_from_camera` ([`marker_from_camera`], the rotation part of T_ros · T_m) with every
 //! translation divided by [`GROUND_TRUTH_SCALE`] (the motion capture's metres are 6 % larger than
 //! the camera's). Checked on the "crowd" window used by the tests (people in view) by warping
 //! each depth image into the frames 5 and 15 later: 41 % of the pixels land within 3 cm of the

@@ -12,6 +12,9 @@ use crate::error::{Error, Result};
 use crate::occlusion::bodies::BodyCompletionConfig;
 use crate::occlusion::OcclusionConfig;
 
+#[cfg(doc)]
+use super::{offline, Processor};
+
 /// Where the camera motion comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum PoseSource {
@@ -182,7 +185,7 @@ pub struct ProcessorConfig {
     pub failure: FailurePolicy,
     /// Depth-connected completion of DVO's ignore mask (the closed loop's previous mask grown
     /// over the rest of each object's depth-continuous surface, see
-    /// [`crate::dvo::completion`]); `None` = the detector's mask as it is (the paper).
+    /// [`crate::dvo::IgnoreCompletion`]); `None` = the detector's mask as it is (the paper).
     pub ignore_completion: Option<IgnoreCompletionConfig>,
     /// Each large enough object of the published mask completed to the depth-connected body it
     /// belongs to when depth edges bound that body ([`crate::occlusion::bodies`], docs/method.md

@@ -7,6 +7,9 @@ use crate::dvo::{DvoFailure, DvoStatus, MAX_DVO_LEVELS};
 use crate::image_buf::{DepthMeters, GrayF32, Mask};
 use crate::occlusion::OcclusionStats;
 
+#[cfg(doc)]
+use super::{offline, FailurePolicy, PoseSource};
+
 /// One RGB-D frame to process.
 #[derive(Debug, Clone, Copy)]
 pub struct FrameInput<'a> {

@@ -12,7 +12,7 @@ use crate::Result;
 
 use super::rectify::GeometryOptions;
 #[cfg(doc)]
-use super::ProcessReport;
+use super::{process_file, ProcessReport};
 #[cfg(doc)]
 use crate::pipeline::PoseSource;
 #[cfg(doc)]
@@ -40,7 +40,7 @@ pub enum OdometryAnchor {
     /// estimated and ground-truth cameras coincide in Foxglove's 3D panel from that frame on and
     /// `world` means one frame in the whole file. A pose stream that starts a little after the
     /// images is normal: earlier frames are written once the anchor frame is known, in the same
-    /// frame ([`ProcessReport::anchor_frame_ns`] says which frame anchored). Without the
+    /// frame ([`ProcessReport::anchor_frame`] says which frame anchored). Without the
     /// channel (or with no poses on it), as [`OdometryAnchor::FirstCamera`]; a channel that
     /// does not decode or covers no frame is not used either (the reason goes to
     /// [`ProcessReport::anchor_skipped`]: ground truth is not this command's input, and its

@@ -149,7 +149,7 @@ fn last_process_record(extras: Vec<ExtraRecord>) -> Option<BTreeMap<String, Stri
         .next_back()
 }
 
-/// A field of an input's identity ([`input_identity`]) that an output's `occmask.process`
+/// A field of an input's identity (`input_identity`) that an output's `occmask.process`
 /// record holds otherwise.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct InputDifference {
@@ -178,7 +178,7 @@ fn identity_difference(
 }
 
 /// Whether `output`, an output of `occmask process`, was made from `input`: the first field of
-/// `input`'s identity ([`input_identity`]) that `output`'s `occmask.process` record holds
+/// `input`'s identity (`input_identity`) that `output`'s `occmask.process` record holds
 /// otherwise; `None` when they agree, or when `output` has no such record.
 ///
 /// # Errors

@@ -91,7 +91,8 @@ use threads::{write_ops, BufferPool, OutputQueue, Prefetched, WriteOp};
 /// [`Error::AnchorPoses`], [`Error::DepthNotRegistered`] and [`Error::MissingTransform`] for
 /// what the file lacks (the CLI names the flag that supplies it); [`Error::Decode`] for
 /// undecodable or unsupported messages; [`Error::SizeMismatch`] when colour and depth differ
-/// in size; I/O and MCAP errors.
+/// in size; [`Error::AlreadyAnnotated`] for an input an earlier run annotated, unless
+/// [`crate::mcap_io::annotate::AnnotateOptions::replace_earlier`]; I/O and MCAP errors.
 pub fn process_file<W: Write + Seek + Send>(
     input: &McapInput,
     sink: W,

@@ -77,7 +77,7 @@ impl DepthRegistration {
     /// camera's frame.
     ///
     /// `threads` bands of depth rows are splatted in parallel (at most
-    /// [`MAX_REGISTRATION_BANDS`]); with 1, [`Self::register_into`] runs on the calling thread
+    /// `MAX_REGISTRATION_BANDS`); with 1, [`Self::register_into`] runs on the calling thread
     /// without rayon and splats straight into its output.
     ///
     /// # Errors

@@ -32,7 +32,7 @@ pub(super) struct Source {
     pub(super) reader: Option<SharedReader>,
 }
 
-/// Any seekable byte source an [`McapInput`] can read ([`std::fs::File`],
+/// Any seekable byte source an [`McapInput`](super::McapInput) can read ([`std::fs::File`],
 /// [`std::io::Cursor`] over bytes, ...).
 pub trait ReadSeek: Read + Seek + Send {}
 
