@@ -176,6 +176,34 @@ fn an_annotated_input_needs_replace_annotations_and_then_gets_one_run_of_each_ch
 }
 
 #[test]
+fn a_missing_or_double_destination_is_a_usage_error_naming_both_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = fixture(dir.path(), "a.mcap", Flavor::Json);
+    let out = occmask(&["process".as_ref(), a.as_os_str()]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("<--output <OUTPUT>|--out-dir <OUT_DIR>|--print-config>"),
+        "{err}"
+    );
+    let o = dir.path().join("o.mcap");
+    let both = [
+        "process".as_ref(),
+        a.as_os_str(),
+        "-o".as_ref(),
+        o.as_os_str(),
+        "--out-dir".as_ref(),
+        dir.path().as_os_str(),
+    ];
+    let out = occmask(&both);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("cannot be used with"), "{}", stderr(&out));
+    let out = occmask(&["process", "--print-config"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_eq!(files_in(dir.path()), vec!["a.mcap"]);
+}
+
+#[test]
 fn refuses_overwrite_and_writing_over_an_input() {
     let dir = tempfile::tempdir().unwrap();
     let a = fixture(dir.path(), "a.mcap", Flavor::Json);

@@ -27,18 +27,17 @@ pub enum PoseArg {
 /// Arguments of `occmask process`.
 #[derive(Debug, ClapArgs)]
 #[command(after_help = AFTER_HELP)]
+// One destination (or --print-config) is required: a missing one is reported with both flags.
+#[command(group = clap::ArgGroup::new("destination")
+    .args(["output", "out_dir", "print_config"])
+    .required(true))]
 pub struct ProcessArgs {
     /// Input MCAP files (never modified).
     #[arg(required_unless_present = "print_config")]
     pub inputs: Vec<PathBuf>,
 
     /// Output file (one input only).
-    #[arg(
-        short,
-        long,
-        conflicts_with = "out_dir",
-        required_unless_present_any = ["out_dir", "print_config"]
-    )]
+    #[arg(short, long)]
     pub output: Option<PathBuf>,
 
     /// Output folder: each input X.mcap becomes DIR/X.occmask.mcap.
