@@ -70,14 +70,15 @@ impl AtomicOutput {
         if final_path.is_dir() {
             return Err(output_error(final_path, "a file path, found a directory"));
         }
+        // Checked here, not left to the rename at the end: `out/` (no such folder) would
+        // otherwise create `out.<pid>.tmp`, do all the work, and fail only at the rename.
         if names_folder(final_path) {
             return Err(output_error(
                 final_path,
                 "a file path, found a directory name (it ends in a separator)",
             ));
         }
-        // Checked here, not left to the rename at the end: `out/` (no such folder) would
-        // otherwise create `out.<pid>.tmp`, do all the work, and fail only at the rename.
+        // A missing folder is named as such, not as the temporary file that cannot be made.
         let folder = match final_path.parent() {
             Some(parent) if !parent.as_os_str().is_empty() => parent,
             _ => Path::new("."),
