@@ -113,7 +113,12 @@ fn plan(args: &ProcessArgs) -> anyhow::Result<Vec<Job>> {
         }
         (None, Some(dir)) => {
             if !dir.is_dir() {
-                bail!("--out-dir {}: not an existing folder", dir.display());
+                let found = if dir.exists() {
+                    "is a file, not a folder"
+                } else {
+                    "does not exist (create it first)"
+                };
+                bail!("--out-dir {} {found}", dir.display());
             }
             for input in &args.inputs {
                 jobs.push(Job {

@@ -735,6 +735,14 @@ fn process_output_and_path_problems() {
         &e,
     );
 
+    // --out-dir that does not exist, or is a file.
+    let args = os(&[&"process", &input, &"--out-dir", &out_dir.join("none")]);
+    let e = Expect::Fails(&["--out-dir", "none does not exist (create it first)"]);
+    check("--out-dir missing", &args, &[&input], &out_dir, keep, &e);
+    let args = os(&[&"process", &input, &"--out-dir", &input]);
+    let e = Expect::Fails(&["--out-dir", "in.mcap is a file, not a folder"]);
+    check("--out-dir is a file", &args, &[&input], &out_dir, keep, &e);
+
     // An output in a folder that does not exist.
     let args = os(&[&"process", &input, &"-o", &out_dir.join("none/o.mcap")]);
     let e = Expect::Fails(&["none/o.mcap", "none does not exist"]);
