@@ -366,6 +366,35 @@ mod tests {
     }
 
     #[test]
+    fn an_output_that_appeared_while_writing_is_kept_unless_forced() {
+        // Another process (another node of a cluster) finishes the same output first.
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("a.mcap");
+        let (o, mut f) = AtomicOutput::create(&out, false, &[]).unwrap();
+        f.write_all(b"mine").unwrap();
+        let temp = o.temp_path().to_owned();
+        std::fs::write(&out, b"theirs").unwrap();
+        let err = o.commit(f).unwrap_err();
+        assert!(
+            matches!(
+                &err,
+                Error::OutputExists {
+                    appeared_while_writing: true,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert_eq!(std::fs::read(&out).unwrap(), b"theirs");
+        assert!(!temp.exists());
+
+        let (o, mut f) = AtomicOutput::create(&out, true, &[]).unwrap();
+        f.write_all(b"mine").unwrap();
+        o.commit(f).unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"mine");
+    }
+
+    #[test]
     fn refuses_a_folder_name_and_a_missing_folder_before_writing_anything() {
         let dir = tempfile::tempdir().unwrap();
         // `new/` does not exist: a name ending in a separator is a folder all the same (the
