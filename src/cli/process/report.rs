@@ -156,7 +156,7 @@ pub(super) fn print_summary(results: &[JobResult], jobs: &[Job], budget: &Thread
 }
 
 /// One row per file (frames, unpaired messages, time, output), then what was done to each
-/// file's images.
+/// file's images and to an earlier run's messages in it.
 fn summary_table(results: &[JobResult], jobs: &[Job]) -> String {
     use std::fmt::Write as _;
     let w = name_column(results);
