@@ -332,12 +332,18 @@ pub fn earlier_annotation_topics(input: &McapInput) -> Vec<String> {
     let mut topics: Vec<String> = input
         .channels()
         .values()
-        .filter(|c| c.topic.starts_with(TOPIC_PREFIX))
+        .filter(|c| written_by_occmask(&c.topic))
         .map(|c| c.topic.clone())
         .collect();
     topics.sort_unstable();
     topics.dedup();
     topics
+}
+
+/// True for a topic an occmask run writes, but `/tf`: one that [`earlier_annotation_topics`]
+/// reports and [`AnnotateOptions::replace_earlier`] leaves out.
+fn written_by_occmask(topic: &str) -> bool {
+    topic.starts_with(TOPIC_PREFIX)
 }
 
 /// True for a protobuf `foxglove.FrameTransform` that an occmask run wrote.
@@ -385,7 +391,7 @@ impl<W: Write + Seek> AnnotatedWriter<W> {
                 writer.add_schema_with_id(s.id, &s.name, &s.encoding, &s.data)?;
             }
             for c in input.channels().values() {
-                if options.replace_earlier && c.topic.starts_with(TOPIC_PREFIX) {
+                if options.replace_earlier && written_by_occmask(&c.topic) {
                     replaced_channels.push(c.id);
                     continue;
                 }

@@ -67,16 +67,15 @@ impl AtomicOutput {
     /// exists and `force` is false; [`Error::Io`] when the temporary file cannot be created
     /// (e.g. no permission to write in the folder).
     pub fn create(final_path: &Path, force: bool, inputs: &[&Path]) -> Result<(Self, OutputFile)> {
-        if final_path.is_dir() {
-            return Err(output_error(final_path, "a file path, found a directory"));
-        }
         // Checked here, not left to the rename at the end: `out/` (no such folder) would
         // otherwise create `out.<pid>.tmp`, do all the work, and fail only at the rename.
         if names_folder(final_path) {
-            return Err(output_error(
-                final_path,
-                "a file path, found a directory name (it ends in a separator)",
-            ));
+            let found = if final_path.is_dir() {
+                "a file path, found a directory"
+            } else {
+                "a file path, found a directory name (it ends in a separator)"
+            };
+            return Err(output_error(final_path, found));
         }
         // A missing folder is named as such, not as the temporary file that cannot be made.
         let folder = match final_path.parent() {
