@@ -90,15 +90,7 @@ fn a_time_range_without_frames_fails_naming_the_input_once() {
     let dir = tempfile::tempdir().unwrap();
     let a = fixture(dir.path(), "a.mcap", Flavor::Protobuf);
     let out_path = dir.path().join("out.mcap");
-    let out = occmask(&[
-        "process".as_ref(),
-        a.as_os_str(),
-        "-o".as_ref(),
-        out_path.as_os_str(),
-        "--start".as_ref(),
-        "1000".as_ref(),
-        "-q".as_ref(),
-    ]);
+    let out = crate::common::process(&a, &out_path, &["--start", "1000"]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     let line = err
