@@ -417,6 +417,10 @@ section_bonn_crowd_200() {
   echo "share of the false positives is a person who walks in at the right and stands with arms"
   echo "crossed for about a second (frames 92–124): the reference, which marks only the points that"
   echo "other frames within 3 s see through, marks about half of that body; occmask marks all of it."
+  echo "It is the same person who leaves at 126–129, standing, as the camera turns away: their"
+  echo "accumulation lies on the head and the legs only, the body completion (method.md D26) masks the"
+  echo "rest of them from there, and once the camera has turned those parts out of view (the last"
+  echo "accumulated pixels at frame 125) nothing is left to complete."
   echo
 }
 
