@@ -48,7 +48,7 @@ pub struct ProcessArgs {
     #[arg(long, value_enum, default_value_t = PoseArg::Dvo, conflicts_with = "pose_topic")]
     pub pose: PoseArg,
 
-    /// Use poses from this topic (foxglove PoseInFrame/FrameTransform(s), ROS 2
+    /// Use poses from this topic (Foxglove PoseInFrame/FrameTransform(s); ROS 1 or ROS 2
     /// PoseStamped/TransformStamped/TFMessage) instead of DVO, interpolated to each frame.
     #[arg(long)]
     pub pose_topic: Option<String>,
