@@ -627,8 +627,10 @@ pub fn format_report(report: &EvalReport) -> String {
                     ));
                     continue;
                 }
+                // "pair) " and "pairs)" are as wide, so the columns stay aligned.
+                let pairs = if r.pairs == 1 { "pair) " } else { "pairs)" };
                 out.push_str(&format!(
-                    "    RPE Δ={:<4} ({:>5} pairs)  {:.4} m  {:.3}°\n",
+                    "    RPE Δ={:<4} ({:>5} {pairs}  {:.4} m  {:.3}°\n",
                     r.delta_frames, r.pairs, r.translation_rmse_m, r.rotation_rmse_deg
                 ));
             }

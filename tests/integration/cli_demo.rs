@@ -26,6 +26,16 @@ fn demo_writes_an_mcap_with_masks_and_poses_and_prints_scores() {
         stdout.contains("F1 / precision / recall") && stdout.contains("RPE Δ=1"),
         "{stdout}"
     );
+    // The RPE over the whole run has one pair; its columns line up with the others'.
+    let rpe_rows: Vec<&str> = stdout.lines().filter(|l| l.contains("RPE Δ=")).collect();
+    assert!(rpe_rows.iter().any(|l| l.contains("(    1 pair)  ")), "{stdout}");
+    let metres_column = |l: &&str| l.find(" m ");
+    assert!(
+        rpe_rows
+            .windows(2)
+            .all(|w| metres_column(&w[0]) == metres_column(&w[1])),
+        "{stdout}"
+    );
     // The closed loop on the dominant object: the bar is F1 >= 0.85.
     let f1: f64 = stdout
         .lines()
